@@ -1,0 +1,71 @@
+"""Exceptions raised by sotpy.
+
+Every error that a user can cause derives from :class:`SotpyError`. Messages name the
+entity, the signal (SoT's ``Class(entity)::input(type)::name`` form) and what was
+expected, so that a failure in a running graph can be traced without a debugger. An
+operation that raises leaves the graph as it was before the call.
+"""
+
+from __future__ import annotations
+
+
+class SotpyError(Exception):
+    """Base class of every sotpy error."""
+
+
+class SignalTypeError(SotpyError, TypeError):
+    """A value or a plug does not match the declared type of a signal."""
+
+
+class PlugError(SotpyError):
+    """A plug was refused (wrong direction, wrong type, would close a cycle)."""
+
+
+class CycleError(PlugError):
+    """A plug or a dependency change would close a same-tick cycle.
+
+    ``cycle`` holds the signal names along the cycle, first one repeated at the end.
+    """
+
+    def __init__(self, message: str, cycle: list[str]):
+        super().__init__(message)
+        self.cycle = cycle
+
+
+class UnpluggedError(SotpyError):
+    """An input signal was read while neither plugged nor set to a constant.
+
+    ``signals`` lists the full names of every unplugged input involved.
+    """
+
+    def __init__(self, message: str, signals: list[str]):
+        super().__init__(message)
+        self.signals = signals
+
+
+class EntityError(SotpyError):
+    """Creating, finding or naming an entity failed."""
+
+
+class SignalNotFoundError(SotpyError, AttributeError):
+    """An entity has no signal of the requested name."""
+
+
+class CommandError(SotpyError, TypeError):
+    """A command was called with missing, extra or ill-typed arguments."""
+
+
+class FactoryError(SotpyError):
+    """An entity class is not known to the factory."""
+
+
+class GraphvizError(SotpyError):
+    """The ``dot`` program is missing or failed to render a graph."""
+
+
+class TracerOverflow(SotpyError):
+    """A tracer buffer is full and the tracer was configured to raise."""
+
+
+class SotpyWarning(UserWarning):
+    """Warnings emitted by sotpy (e.g. a tracer buffer that filled up)."""

@@ -1,0 +1,133 @@
+"""The pool of entities, the graph's clock and the factory of entity classes.
+
+There is one :data:`pool` per process: it is the only global state of sotpy. It holds
+
+- the entities by name (:meth:`Pool.getEntity`, :meth:`Pool.getSignal`),
+- the current tick :attr:`Pool.time` (the latest tick any signal was computed or written
+  at; ``sig.value`` reads at this tick),
+- a topology counter :attr:`Pool.version`, bumped on every plug, unplug, dependency or
+  mode change, which tells compiled plans to recompile.
+
+:data:`factory` maps class names to entity classes; a subclass of ``Entity`` registers
+itself when it is defined.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ..errors import EntityError, FactoryError, SignalNotFoundError
+
+if TYPE_CHECKING:
+    from .entity import Entity
+    from .signal import Signal
+
+__all__ = ["Factory", "Pool", "factory", "pool"]
+
+
+class Pool:
+    """Registry of the entities of the process, with the graph clock."""
+
+    def __init__(self) -> None:
+        self._entities: dict[str, Entity] = {}
+        self.time: int = 0
+        self.version: int = 0
+
+    # -- entities ---------------------------------------------------------------------
+    def register(self, entity: Entity) -> None:
+        """Add ``entity`` under its name (called by entity construction)."""
+        if entity.name in self._entities:
+            raise EntityError(f"an entity named {entity.name!r} already exists in the pool")
+        self._entities[entity.name] = entity
+
+    def getEntity(self, name: str) -> Entity:
+        """Return the entity called ``name``."""
+        try:
+            return self._entities[name]
+        except KeyError:
+            known = ", ".join(sorted(self._entities)) or "none"
+            raise EntityError(f"unknown entity {name!r} (entities in the pool: {known})") from None
+
+    def hasEntity(self, name: str) -> bool:
+        """Whether an entity called ``name`` exists."""
+        return name in self._entities
+
+    def getSignal(self, path: str) -> Signal:
+        """Return the signal at ``"entity.signal"`` (the signal's short name)."""
+        entity_name, sep, signal_name = path.rpartition(".")
+        if not sep:
+            raise SignalNotFoundError(
+                f"signal path {path!r} must have the form 'entity.signal'"
+            )
+        return self.getEntity(entity_name).signal(signal_name)
+
+    def entities(self) -> list[Entity]:
+        """The entities, in creation order."""
+        return list(self._entities.values())
+
+    def list(self) -> list[str]:
+        """Names of the entities, in creation order."""
+        return list(self._entities)
+
+    def remove(self, entity: Entity | str) -> None:
+        """Unplug every input of ``entity`` fed by it or feeding it, and drop it."""
+        e = self.getEntity(entity if isinstance(entity, str) else entity.name)
+        e._detach()
+        del self._entities[e.name]
+        self.version += 1
+
+    def clear(self) -> None:
+        """Forget every entity and reset the clock (tests start from here)."""
+        for e in list(self._entities.values()):
+            e._detach()
+        self._entities.clear()
+        self.time = 0
+        self.version += 1
+
+    def advance(self, t: int) -> None:
+        """Move the clock forward to tick ``t`` (never backwards)."""
+        if t > self.time:
+            self.time = t
+
+    def writeGraph(self, path: str, **kwargs: Any) -> str:
+        """Write the graph to ``path``; see :func:`sotpy.graph.writeGraph`."""
+        from .dot import writeGraph
+
+        return writeGraph(path, **kwargs)
+
+
+class Factory:
+    """Entity classes by class name; ``factory.create("Task", "t1")`` builds one."""
+
+    def __init__(self) -> None:
+        self._classes: dict[str, type[Entity]] = {}
+
+    def register(self, cls: type[Entity]) -> None:
+        """Record ``cls`` under ``cls.className`` (a redefinition replaces the old one)."""
+        self._classes[cls.className] = cls
+
+    def create(self, className: str, name: str, *args: Any, **kwargs: Any) -> Entity:
+        """Create (or return, SoT's idempotent rule) entity ``name`` of class ``className``."""
+        return self.getClass(className)(name, *args, **kwargs)
+
+    def getClass(self, className: str) -> type[Entity]:
+        """Return the class registered as ``className``."""
+        try:
+            return self._classes[className]
+        except KeyError:
+            raise FactoryError(
+                f"unknown entity class {className!r}; known classes: "
+                f"{', '.join(sorted(self._classes))}"
+            ) from None
+
+    def hasClass(self, className: str) -> bool:
+        """Whether ``className`` is registered."""
+        return className in self._classes
+
+    def classes(self) -> list[str]:
+        """Names of the registered classes, sorted."""
+        return sorted(self._classes)
+
+
+pool = Pool()
+factory = Factory()
