@@ -61,9 +61,13 @@ class Command:
 
     def usage(self) -> str:
         """``name(arg: type, ...) -> type``, without ``self``."""
-        params = list(self.signature.parameters.values())[1:]
-        sig = self.signature.replace(parameters=params)
-        return f"{self.name}{sig}"
+        try:  # evaluate string annotations (``from __future__ import annotations``)
+            sig = inspect.signature(self.fn, eval_str=True)
+        except Exception:
+            sig = self.signature
+        params = list(sig.parameters.values())[1:]
+        text = str(sig.replace(parameters=params))
+        return f"{self.name}{text.replace('numpy.ndarray', 'ndarray')}"
 
     def call(self, entity: Any, args: tuple[Any, ...], kwargs: dict[str, Any]) -> Any:
         """Check and convert the arguments, then run the command."""

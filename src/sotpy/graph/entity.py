@@ -29,10 +29,11 @@ from __future__ import annotations
 
 import inspect
 import keyword
+import warnings
 from collections.abc import Callable, Iterable
 from typing import Any, ClassVar
 
-from ..errors import EntityError, SignalNotFoundError
+from ..errors import EntityError, SignalNotFoundError, SotpyWarning
 from .command import BoundCommand, Command
 from .pool import factory, pool
 from .signal import InputSignal, OutputSignal, Signal, _remove_dependant
@@ -148,6 +149,14 @@ class EntityMeta(type):
         existing = pool._entities.get(name)
         if existing is not None:
             if type(existing) is cls:
+                if args or kwargs:
+                    warnings.warn(
+                        f"{cls.className}({name}) already exists: the construction arguments "
+                        "are ignored (SoT's rule returns the existing entity); use its "
+                        "commands to change it",
+                        SotpyWarning,
+                        stacklevel=2,
+                    )
                 return existing
             raise EntityError(
                 f"cannot create {cls.className}({name}): an entity named {name!r} already "
@@ -324,8 +333,12 @@ class Entity(metaclass=EntityMeta):
         """Names of the commands, sorted."""
         return sorted(self._commands)
 
-    def help(self, name: str | None = None) -> str:
-        """Print and return the class doc and command list, or one command's doc."""
+    def help(self, name: str | None = None) -> None:
+        """Print the class doc and the command list, or the doc of command ``name``."""
+        print(self.helpText(name))
+
+    def helpText(self, name: str | None = None) -> str:
+        """The text :meth:`help` prints."""
         if name is None:
             doc = inspect.cleandoc(type(self).__doc__ or "").split("\n\n", 1)[0]
             lines = [doc, "List of commands:"] if doc else ["List of commands:"]
@@ -340,15 +353,14 @@ class Entity(metaclass=EntityMeta):
                     f"{self.className}({self.name}) has no command {name!r} "
                     f"(commands: {', '.join(self.commands()) or 'none'})"
                 )
-            body = "\n".join("   " + line for line in cmd.__doc__.splitlines())
+            body = "\n".join(("   " + line).rstrip() for line in cmd.__doc__.splitlines())
             text = f"{cmd.usage()}\n{body}" if body else cmd.usage()
-        print(text)
         return text
 
     def getCommand(self, name: str) -> BoundCommand:
         """The bound command called ``name``."""
         if name not in self._commands:
-            self.help(name)  # raises with the list
+            self.helpText(name)  # raises with the list
         return self._commands[name].__get__(self)
 
     def graphClusters(self) -> list[tuple[str, list[Entity]]]:

@@ -74,9 +74,10 @@ class Plan:
             UnpluggedError: listing every unset input the sinks depend on.
         """
         order, live = _topological(self._sinks)
-        lines = ["def _tick(t):"]
+        lines: list[str] = []
         ns: dict[str, Any] = {}
         index = {id(s): i for i, s in enumerate(order)}
+        holders: dict[int, str] = {}
         for i, s in enumerate(order):
             ns[f"s{i}"] = s
         for i, s in enumerate(order):
@@ -84,11 +85,13 @@ class Plan:
                 args = []
                 for src in s._srcs:
                     j = index.get(id(src))
-                    if j is None:
-                        name = f"c{len(ns)}"
-                        ns[name] = src
-                    else:
+                    if j is not None:
                         name = f"s{j}"
+                    elif id(src) in holders:
+                        name = holders[id(src)]
+                    else:
+                        name = holders[id(src)] = f"c{len(holders)}"
+                        ns[name] = src
                     args.append(f"{name}._value")
                 if s._withTime:
                     args.insert(0, "t")
@@ -98,9 +101,10 @@ class Plan:
                 lines.append(f"  s{i}._time = s{i}._checked = t")
             else:
                 lines.append(f" if s{i}._checked < t: s{i}._update(t)")
-        if len(lines) == 1:
-            lines.append(" pass")
-        source = "\n".join(lines)
+        # The objects the steps use are bound as default arguments: locals are the
+        # fastest names CPython has.
+        params = "".join(f", {name}={name}" for name in ns)
+        source = "\n".join([f"def _tick(t{params}):", *lines, " return None"])
         exec(compile(source, "<sotpy plan>", "exec"), ns)
         self._tick = ns["_tick"]
         self.steps = order

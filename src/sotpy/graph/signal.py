@@ -131,7 +131,10 @@ class Signal:
 
         Assigning sets the signal to a constant (see :meth:`setConstant`).
         """
-        return _read(self._holder(), pool.time, self)
+        t = pool.time
+        if t <= self._checked:  # up to date (a plugged input never is: it forwards)
+            return self._value
+        return _read(self._holder(), t, self)
 
     @value.setter
     def value(self, v: Any) -> None:
@@ -337,16 +340,31 @@ class OutputSignal(Signal):
     def _update(self, t: int) -> None:
         """Recompute at ``t`` if outdated (dependencies already brought to ``t``)."""
         tm = self._time
-        if self._invalid > tm or (
-            t >= tm + self.period
-            and (self.timeDependent or any(s._time > tm for s in self._srcs))
-        ):
-            args = [s._value for s in self._srcs]
-            self._value = self._fn(t, *args) if self._withTime else self._fn(*args)
-            self._time = t
-            self._checked = t + self.period - 1
+        srcs = self._srcs
+        if self._invalid <= tm:  # not invalidated: apply the outdated rule
+            due = tm + self.period
+            if t < due:
+                self._checked = due - 1
+                return
+            if not self.timeDependent:
+                for s in srcs:
+                    if s._time > tm:
+                        break
+                else:  # no dependency changed since the last computation
+                    self._checked = t
+                    return
+        fn = self._fn
+        n = len(srcs)
+        if self._withTime:
+            self._value = fn(t, *[s._value for s in srcs])
+        elif n == 1:
+            self._value = fn(srcs[0]._value)
+        elif n == 2:
+            self._value = fn(srcs[0]._value, srcs[1]._value)
         else:
-            self._checked = max(t, tm + self.period - 1)
+            self._value = fn(*[s._value for s in srcs])
+        self._time = t
+        self._checked = t + self.period - 1
 
     def _modeLabel(self) -> str:
         return "Fun" if self._mode == FUNCTION else "Cst"
@@ -508,31 +526,47 @@ def _read(h: Signal, t: int, asked: Signal) -> Any:
     return h._value
 
 
-def _pull(root: OutputSignal, t: int) -> None:
-    """Bring ``root`` up to date at ``t``: an iterative depth-first walk of the outdated
-    part of its upstream graph, then the updates in post-order."""
-    post: list[OutputSignal] = []
-    seen = {root}
+_RECURSION_DEPTH = 100  # recursive pull up to this depth, then an explicit stack
+
+
+def _pull(node: OutputSignal, t: int, depth: int = 0) -> None:
+    """Bring ``node`` up to date at ``t``: dependencies first, then ``node``.
+
+    Recursive while shallow (the cheapest walk in CPython), it switches to an explicit
+    stack below :data:`_RECURSION_DEPTH`, so a graph of any depth is evaluated without
+    approaching the interpreter's recursion limit. A dependency that is up to date at
+    ``t`` (``t <= _checked``) is not visited, so each signal is walked once.
+    """
+    for d in node._srcs:
+        if t > d._checked:
+            m = d._mode
+            if m == FUNCTION:
+                if depth < _RECURSION_DEPTH:
+                    _pull(d, t, depth + 1)  # type: ignore[arg-type]
+                else:
+                    _pull_iterative(d, t)  # type: ignore[arg-type]
+            elif m == UNSET:
+                raise _unplugged([d], node)
+    node._update(t)
+
+
+def _pull_iterative(root: OutputSignal, t: int) -> None:
+    """:func:`_pull` with an explicit stack: post-order walk of the outdated upstream."""
     stack = [(root, iter(root._srcs))]
     push = stack.append
     while stack:
         node, it = stack[-1]
         for d in it:
-            m = d._mode
-            if m:
+            if t > d._checked:
+                m = d._mode
+                if m == FUNCTION:
+                    push((d, iter(d._srcs)))  # type: ignore[attr-defined]
+                    break
                 if m == UNSET:
-                    raise _unplugged([d], root)
-                continue
-            if t <= d._checked or d in seen:
-                continue
-            seen.add(d)
-            push((d, iter(d._srcs)))  # type: ignore[attr-defined]
-            break
+                    raise _unplugged([d], node)
         else:
             stack.pop()
-            post.append(node)
-    for node in post:
-        node._update(t)
+            node._update(t)
 
 
 def _unplugged(inputs: list[Signal], asked: Signal) -> UnpluggedError:

@@ -80,6 +80,10 @@ class Tracer(Entity):
         self._columns.append((label, sig))
         self._buffers = None
 
+    def columns(self) -> list[str]:
+        """Labels of the traced signals, in column order."""
+        return [label for label, _ in self._columns]
+
     @command
     def remove(self, name: str) -> None:
         """Stop tracing the column called ``name``."""

@@ -1,0 +1,5 @@
+"""``python -m sotpy``: the ``sotpy`` command line (see :mod:`sotpy.cli`)."""
+
+from .cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,134 @@
+"""The ``sotpy`` command line.
+
+::
+
+    sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S]
+
+Each sub-command is a function ``add_<name>(subparsers)`` that adds its parser and sets
+``func`` (the function run with the parsed arguments, returning the exit code); add a
+sub-command by writing one and listing it in :data:`SUBCOMMANDS`. Demos are listed in
+:data:`DEMOS` (name -> (help, function adding the demo's options, function running it)).
+"""
+
+import argparse
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _finite_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return v
+
+
+# -- demos -----------------------------------------------------------------------------
+def _pendulum_options(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("pendulum demo")
+    g.add_argument("--plot", metavar="PATH", help="save a plot of x, theta and force (PNG)")
+    g.add_argument(
+        "--duration", type=_positive_float, default=10.0, metavar="S", help="simulated time, s"
+    )
+    g.add_argument(
+        "--theta0", type=_finite_float, default=0.1, metavar="RAD", help="initial angle, rad"
+    )
+    g.add_argument("--dt", type=_positive_float, default=1e-3, metavar="S", help="time step, s")
+
+
+def _pendulum_run(args: argparse.Namespace) -> int:
+    from .errors import SotpyError
+    from .tutorial import run_pendulum
+
+    try:
+        result = run_pendulum(
+            duration=args.duration, dt=args.dt, theta0=args.theta0, plot=args.plot
+        )
+    except SotpyError as exc:
+        print(f"sotpy demo pendulum: {exc}", file=sys.stderr)
+        return 1
+    verdict = "converged" if result["converged"] else "did NOT converge"
+    print(
+        f"pendulum {verdict} (|theta| < 1e-3 rad and |theta_dot| < 1e-2 rad/s); "
+        f"{len(result['time']) - 1} ticks in {result['wall_time']:.2f} s"
+    )
+    return 0 if result["converged"] else 1
+
+
+DEMOS: dict[
+    str,
+    tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]],
+] = {
+    "pendulum": (
+        "SoT's tutorial: an inverted pendulum balanced by LQR state feedback",
+        _pendulum_options,
+        _pendulum_run,
+    ),
+}
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    return DEMOS[args.name][2](args)
+
+
+def add_demo(subparsers: Any) -> None:
+    """``sotpy demo NAME [options]``."""
+    epilog = "\n".join(f"  {name}: {helptext}" for name, (helptext, _, _) in DEMOS.items())
+    p = subparsers.add_parser(
+        "demo",
+        help="run a demo",
+        description="Run a demo. Exit code 0 when it succeeds.",
+        epilog="demos:\n" + epilog,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("name", choices=sorted(DEMOS), help="which demo")
+    for _, options, _ in DEMOS.values():
+        options(p)
+    p.set_defaults(func=_run_demo)
+
+
+SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo]
+
+
+# -- entry point -----------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    """The ``sotpy`` argument parser, with every sub-command of :data:`SUBCOMMANDS`."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="sotpy", description="The Stack of Tasks in Python: demos and tools."
+    )
+    parser.add_argument("--version", action="version", version=f"sotpy {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in SUBCOMMANDS:
+        add(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``sotpy`` command line with ``argv`` (default: ``sys.argv[1:]``).
+
+    Returns the exit code (argparse's 2 for a usage error, 0 for ``--help``).
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, usage errors
+        return exc.code if isinstance(exc.code, int) else 1
+    return int(args.func(args))
