@@ -147,8 +147,10 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     args = parser.parse_args(argv)
     sizes = (10, 100) if args.quick else (10, 100, 1000, 10_000)
     rows = [measure(n, repeats=3 if args.quick else 7) for n in sizes]
-    print(f"machine: {platform.machine()}, {platform.processor() or '?'}, "
-          f"Python {platform.python_version()}")
+    print(
+        f"machine: {platform.machine()}, {platform.processor() or '?'}, "
+        f"Python {platform.python_version()}"
+    )
     print("| signals | floor ns | plan ns | plan/floor | lazy ns | lazy/floor | re-read ns |")
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:

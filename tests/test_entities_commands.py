@@ -5,7 +5,7 @@ runtime (documented in ``sotpy.graph.entity``, ``pool`` and ``command``)."""
 from __future__ import annotations
 
 import math
-from typing import Optional
+from typing import Annotated, Optional
 
 import numpy as np
 import pytest
@@ -201,11 +201,6 @@ def test_unknown_signal_lists_the_signals():
         pool.getSignal("nodot")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: Pool.getSignal splits the path at the LAST dot (rpartition), although entity "
-    "names cannot contain dots and signal names may ('any name'); 'e.l.w' looks for entity 'e.l'",
-)
 def test_getSignal_reaches_a_signal_whose_name_has_a_dot():
     e = EntAdd("e")
     s = e.addSignal(InputSignal(e, "l.w", DOUBLE, 1.0))
@@ -399,11 +394,6 @@ def test_command_errors_are_sotpy_errors():
         e.setSize(1.5)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: Command.__set_name__ overwrites the name given with @command(name=...), so "
-    "the command is registered under the method name instead",
-)
 def test_command_decorator_name_argument_names_the_command():
     class EntNamed(Entity):
         @command(name="print")
@@ -416,12 +406,6 @@ def test_command_decorator_name_argument_names_the_command():
     assert e.getCommand("print")() == 1
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: one unresolvable annotation (a class local to a function, with postponed "
-    "annotations) makes get_type_hints fail and disables the checks of ALL arguments, "
-    "although the code promises to 'check what can be checked'",
-)
 def test_an_unresolvable_annotation_does_not_disable_the_other_checks():
     class LocalThing:
         pass
@@ -435,6 +419,35 @@ def test_an_unresolvable_annotation_does_not_disable_the_other_checks():
     e = EntLocalAnn("loc")
     with pytest.raises(CommandError, match=r"EntLocalAnn\(loc\)\.f.*'x'"):
         e.f("not a number", LocalThing())
+
+
+class EntTyped(Entity):
+    """Commands annotated with signal types."""
+
+    @command
+    def setV(self, v: VECTOR, w: Annotated[np.ndarray, VECTOR]) -> float:
+        """Vector arguments."""
+        return float(v.sum() + w.sum())
+
+
+def test_signal_type_annotations_check_arguments():
+    e = EntTyped("typed")
+    assert e.setV([1, 2], [3]) == 6.0
+    with pytest.raises(CommandError, match=r"EntTyped\(typed\)\.setV.*'v'"):
+        e.setV([[1.0]], [1.0])
+    with pytest.raises(CommandError, match=r"EntTyped\(typed\)\.setV.*'w'"):
+        e.setV([1.0], [[1.0]])
+
+
+def test_output_depending_on_an_unknown_signal_is_refused_at_class_definition():
+    with pytest.raises(EntityError, match="nothere"):
+
+        class EntBadDeps(Entity):
+            @Output(DOUBLE, deps=("nothere",))
+            def out(self, x):
+                return x
+
+    assert not factory.hasClass("EntBadDeps")
 
 
 # -- attributes, signals added at runtime ---------------------------------------------------

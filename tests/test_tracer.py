@@ -162,12 +162,6 @@ def test_trigger_period_records_every_k_ticks():
     np.testing.assert_array_equal(tr.data()["clock.vec"], [vec_ref(t) for t in (0, 3, 6, 9)])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: a traced constant written at every tick pushes an invalidation into "
-    "tracer.trigger, which then records at every tick despite trigger.setPeriod(2) "
-    "(push invalidation overrides the period rule 'recompute at most every period ticks')",
-)
 def test_trigger_period_holds_when_a_traced_constant_changes_every_tick():
     src = TrcInputs("src")
     tr = Tracer("tr")
@@ -230,11 +224,6 @@ def test_overflow_ring_keeps_the_newest_rows_in_order():
     np.testing.assert_array_equal(d["h"][:, 0], [2.5, 3.0, 3.5])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG: with overflow='ring', dropped counts wrap-arounds (rows written when the "
-    "head is at the end of the buffer), not overwritten rows as documented",
-)
 def test_overflow_ring_counts_every_overwritten_row():
     tr, _ = _tracer(bufferSize=3, overflow="ring")
     tr.start()

@@ -41,13 +41,15 @@ class Command:
 
     def __init__(self, fn: Callable[..., Any], name: str | None = None) -> None:
         self.fn = fn
+        self._explicit_name = name is not None
         self.name = name or fn.__name__
         self.__doc__ = inspect.cleandoc(fn.__doc__ or "")
         self.signature = inspect.signature(fn)
         self._converters: dict[str, Callable[[Any], Any]] | None = None
 
     def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
+        if not self._explicit_name:
+            self.name = name
 
     def __get__(self, obj: Any, objtype: type | None = None) -> Any:
         if obj is None:
@@ -56,8 +58,8 @@ class Command:
 
     @property
     def summary(self) -> str:
-        """The first line of the doc string."""
-        return self.__doc__.split("\n", 1)[0] if self.__doc__ else ""
+        """The first paragraph of the doc string, on one line."""
+        return " ".join(self.__doc__.split("\n\n", 1)[0].split()) if self.__doc__ else ""
 
     def usage(self) -> str:
         """``name(arg: type, ...) -> type``, without ``self``."""
@@ -96,8 +98,14 @@ class Command:
     def _make_converters(self) -> dict[str, Callable[[Any], Any]]:
         try:
             hints = typing.get_type_hints(self.fn, include_extras=True)
-        except Exception:  # unresolvable annotation: check what can be checked
+        except Exception:  # one unresolvable annotation: resolve the others one by one
             hints = {}
+            scope = getattr(self.fn, "__globals__", {})
+            for name, ann in getattr(self.fn, "__annotations__", {}).items():
+                try:
+                    hints[name] = eval(ann, scope) if isinstance(ann, str) else ann
+                except Exception:
+                    continue
         converters = {}
         for i, (name, param) in enumerate(self.signature.parameters.items()):
             if i == 0 or name not in hints:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime
+import itertools
 import shutil
 import subprocess
 from pathlib import Path
@@ -54,10 +55,11 @@ def graphDot(title: str = "sotpy") -> str:
             lines.append(f"    label={_q(label)}; color=magenta; style=rounded;")
             lines.extend(f"    {_q(m.name)};" for m in members)
             lines.append("  }")
-            for a, b in zip(members, members[1:]):
+            for a, b in itertools.pairwise(members):
                 lines.append(f"  {_q(a.name)} -> {_q(b.name)} [color=red, style=dashed];")
             if members:
-                lines.append(f"  {_q(e.name)} -> {_q(members[0].name)} [color=magenta, style=dotted];")
+                head = members[0].name
+                lines.append(f"  {_q(e.name)} -> {_q(head)} [color=magenta, style=dotted];")
             n += 1
     lines.append("}")
     return "\n".join(lines) + "\n"

@@ -187,7 +187,7 @@ class Entity(metaclass=EntityMeta):
         specs: dict[str, Input | Output] = {}
         commands: dict[str, Command] = {}
         for klass in reversed(cls.__mro__):
-            for attr, value in vars(klass).items():
+            for value in vars(klass).values():
                 if isinstance(value, (Input, Output)):
                     specs[value.name] = value  # type: ignore[index]
                 elif isinstance(value, Command):
@@ -215,9 +215,7 @@ class Entity(metaclass=EntityMeta):
             self.addSignal(spec.make(self))
         for spec in self._specs.values():
             if isinstance(spec, Output) and spec.deps:
-                self._signals[spec.name].setDependencies(
-                    [self._signals[d] for d in spec.deps]
-                )
+                self._signals[spec.name].setDependencies([self._signals[d] for d in spec.deps])
 
     def _detach(self) -> None:
         """Unplug everything connected to this entity (it is being removed)."""
@@ -246,7 +244,9 @@ class Entity(metaclass=EntityMeta):
         free in the class, the attribute ``entity.<name>`` (tab-completed).
         """
         if sig.entity is not self:
-            raise EntityError(f"{self.className}({self.name}): {sig.name} belongs to another entity")
+            raise EntityError(
+                f"{self.className}({self.name}): {sig.name} belongs to another entity"
+            )
         if sig.shortName in self._signals:  # type: ignore[attr-defined]
             raise EntityError(
                 f"{self.className}({self.name}): a signal named {sig.shortName!r} already exists"

@@ -8,8 +8,9 @@ Python function, so that a tick costs one comparison and one callback call per s
 
 Each step of the plan is one of two kinds:
 
-* **live**: the output reads, directly or not, a state signal that its entity writes
-  every tick (``Device.state``) or a time-dependent output. Its dependencies change at
+* **live**: the output has period 1 and reads, directly or through other live
+  outputs, a state signal that its entity writes every tick (``Device.state``) or a
+  time-dependent output of period 1. Its dependencies change at
   every tick, so when it is due it is recomputed without looking at them.
 * **static**: the output reads only constants. It applies the full lazy rule (recompute
   only if a dependency changed), so a subgraph of constants costs one comparison per
@@ -41,7 +42,7 @@ class Plan:
     of them would) and advances the clock to ``t``.
     """
 
-    __slots__ = ("_sinks", "_version", "_tick", "steps", "source")
+    __slots__ = ("_sinks", "_tick", "_version", "source", "steps")
 
     def __init__(self, sinks: Iterable[Signal]) -> None:
         sinks = tuple(sinks)
@@ -163,8 +164,10 @@ def _topological(sinks: tuple[Signal, ...]) -> tuple[list[OutputSignal], list[bo
     position = {id(s): i for i, s in enumerate(order)}
     live: list[bool] = []
     for s in order:
-        is_live = s.timeDependent
-        if not is_live:
+        # A periodic output changes only every few ticks: neither it nor what reads
+        # only it is live (the outdated rule decides, as for the lazy pull).
+        is_live = s.period == 1 and s.timeDependent
+        if not is_live and s.period == 1:
             for src in s._srcs:
                 j = position.get(id(src))
                 if (j is not None and live[j]) or getattr(src, "_volatile", False):

@@ -54,11 +54,9 @@ class Pool:
 
     def getSignal(self, path: str) -> Signal:
         """Return the signal at ``"entity.signal"`` (the signal's short name)."""
-        entity_name, sep, signal_name = path.rpartition(".")
+        entity_name, sep, signal_name = path.partition(".")  # entity names have no dot
         if not sep:
-            raise SignalNotFoundError(
-                f"signal path {path!r} must have the form 'entity.signal'"
-            )
+            raise SignalNotFoundError(f"signal path {path!r} must have the form 'entity.signal'")
         return self.getEntity(entity_name).signal(signal_name)
 
     def entities(self) -> list[Entity]:

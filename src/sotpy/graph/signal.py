@@ -51,6 +51,9 @@ UNSET = 2
 PLUGGED = 3
 
 NEVER = -1  # ``time`` of a signal never computed nor written
+# ``_invalid`` of an output whose next read must recompute it even before its period
+# elapsed (its callback, dependencies or period changed); cleared by the computation.
+FORCE = 1 << 62
 
 
 class Signal:
@@ -64,17 +67,17 @@ class Signal:
     """
 
     __slots__ = (
-        "_value",
-        "_time",
+        "__weakref__",
         "_checked",
+        "_dependants",
         "_invalid",
         "_mode",
-        "_dependants",
+        "_time",
+        "_value",
+        "doc",
         "entity",
         "shortName",
         "type",
-        "doc",
-        "__weakref__",
     )
     direction = "signal"
 
@@ -85,8 +88,11 @@ class Signal:
         self.doc = doc
         self._value: Any = None
         self._time = NEVER
-        self._checked = NEVER  # the value is known valid for every tick <= _checked
-        self._invalid = NEVER  # tick of the last push invalidation
+        # The value is known valid for every tick <= _checked (the reads' fast path).
+        self._checked = NEVER
+        # Tick of the last invalidation; the signal is invalidated ("dirty") while
+        # _invalid > _checked, which a computation clears by moving _checked forward.
+        self._invalid = NEVER
         self._mode = UNSET
         self._dependants: list[Signal] = []
 
@@ -205,12 +211,12 @@ class OutputSignal(Signal):
     """
 
     __slots__ = (
-        "_fn",
-        "_withTime",
+        "_callback",
         "_deps",
+        "_fn",
         "_srcs",
         "_volatile",
-        "_callback",
+        "_withTime",
         "period",
         "timeDependent",
     )
@@ -272,7 +278,7 @@ class OutputSignal(Signal):
             s._dependants.append(self)
         self._resolve()
         pool.version += 1
-        _invalidate(self)
+        _invalidate(self, force=True)
 
     def _resolve(self) -> None:
         self._srcs = tuple(s._holder() for s in self._deps)
@@ -296,32 +302,36 @@ class OutputSignal(Signal):
             for s in self._deps:
                 _refuse_cycle(s, self, f"restoring the callback of {self.name}")
             self._mode = FUNCTION
-            self._time = self._checked = min(self._time, pool.time - 1)
-            self._invalid = pool.time
             pool.version += 1
-            _invalidate_dependants(self)
+            _invalidate(self, force=True)
 
     def setFunction(self, callback: Callable[..., Any], *, withTime: bool = False) -> None:
         """Replace the callback (it receives the dependencies' values, ``t`` first if
-        ``withTime``)."""
-        self._callback = callback
+        ``withTime``) and compute with it from the next read on.
+
+        On an output holding a constant this also restores computing; refused, leaving
+        the old callback and the constant, if that would close a cycle.
+        """
+        if self._mode != FUNCTION:
+            for s in self._deps:
+                _refuse_cycle(s, self, f"restoring the callback of {self.name}")
+        self._callback = self._fn = callback
         self._withTime = withTime
         self._volatile = False
-        if self._mode == FUNCTION:
-            self._fn = callback
-            pool.version += 1
-            _invalidate(self)
-        else:
-            self._fn = callback
-            self.resetCallback()
+        self._mode = FUNCTION
+        pool.version += 1
+        _invalidate(self, force=True)
 
     def setReady(self) -> None:
-        """Mark the value outdated now (its entity changed a parameter it reads)."""
-        _invalidate(self)
+        """Recompute at the next read, even before the period elapsed (its entity
+        changed a parameter the callback reads)."""
+        _invalidate(self, force=True)
 
     def setPeriod(self, period: int) -> None:
-        """Recompute at most every ``period`` ticks."""
+        """Recompute at most every ``period`` ticks, from now on."""
         self.period = _check_period(self, period)
+        if self._mode == FUNCTION and self._time != NEVER:
+            self._checked = min(self._checked, self._time + self.period - 1)
         pool.version += 1
 
     def write(self, v: Any, t: int) -> None:
@@ -340,9 +350,10 @@ class OutputSignal(Signal):
     def _update(self, t: int) -> None:
         """Recompute at ``t`` if outdated (dependencies already brought to ``t``)."""
         tm = self._time
+        period = self.period
         srcs = self._srcs
-        if self._invalid <= tm:  # not invalidated: apply the outdated rule
-            due = tm + self.period
+        if self._invalid <= self._checked:  # not invalidated: the outdated rule
+            due = tm + period
             if t < due:
                 self._checked = due - 1
                 return
@@ -353,6 +364,12 @@ class OutputSignal(Signal):
                 else:  # no dependency changed since the last computation
                     self._checked = t
                     return
+        elif period > 1 and tm != NEVER and t < tm + period and self._invalid != FORCE:
+            # invalidated before its period elapsed: recompute at the due tick, staying
+            # invalidated until then (_invalid > _checked)
+            self._invalid = tm + period
+            self._checked = tm + period - 1
+            return
         fn = self._fn
         n = len(srcs)
         if self._withTime:
@@ -364,7 +381,9 @@ class OutputSignal(Signal):
         else:
             self._value = fn(*[s._value for s in srcs])
         self._time = t
-        self._checked = t + self.period - 1
+        self._checked = t + period - 1
+        if self._invalid == FORCE:
+            self._invalid = t
 
     def _modeLabel(self) -> str:
         return "Fun" if self._mode == FUNCTION else "Cst"
@@ -373,7 +392,7 @@ class OutputSignal(Signal):
 class InputSignal(Signal):
     """A signal an entity reads: plugged to an output, a constant, or unset."""
 
-    __slots__ = ("_source", "_default")
+    __slots__ = ("_default", "_source")
     direction = "input"
 
     def __init__(
@@ -434,6 +453,8 @@ class InputSignal(Signal):
             self._value = None
             self._mode = UNSET
         self._time = self._checked = pool.time
+        if self._mode == UNSET:
+            self._checked = NEVER  # never up to date: reading it must raise
         self._retarget()
         _invalidate_dependants(self)
 
@@ -488,6 +509,7 @@ def plug(source: Signal, target: Signal) -> None:
     target._source = source
     target._mode = PLUGGED
     target._value = None
+    target._checked = NEVER  # a plugged input forwards: never take its own fast path
     source._dependants.append(target)
     target._retarget()
     _invalidate_dependants(target)
@@ -580,13 +602,12 @@ def _unplugged(inputs: list[Signal], asked: Signal) -> UnpluggedError:
     )
 
 
-def _invalidate(sig: OutputSignal) -> None:
-    """Make ``sig`` and everything downstream outdated at the current tick."""
+def _invalidate(sig: OutputSignal, force: bool = False) -> None:
+    """Make ``sig`` and everything downstream outdated at the current tick; with
+    ``force``, ``sig`` is recomputed at its next read even before its period elapsed."""
     if sig._mode == FUNCTION:
         now = pool.time
-        sig._invalid = now
-        if sig._time >= now:
-            sig._time = now - 1
+        sig._invalid = FORCE if force and sig.period > 1 else now
         if sig._checked >= now:
             sig._checked = now - 1
     _invalidate_dependants(sig)
@@ -600,11 +621,9 @@ def _invalidate_dependants(sig: Signal) -> None:
     while stack:
         s = stack.pop()
         if isinstance(s, OutputSignal):
-            if s._mode != FUNCTION or (s._invalid > s._time and s._checked < now):
-                continue
+            if s._mode != FUNCTION or s._invalid > s._checked:
+                continue  # a constant, or already invalidated (and so its dependants)
             s._invalid = now
-            if s._time >= now:
-                s._time = now - 1
             if s._checked >= now:
                 s._checked = now - 1
         stack.extend(s._dependants)
@@ -618,36 +637,82 @@ def _remove_dependant(sig: Signal, dependant: Signal) -> None:
             return
 
 
+def _reads(s: Signal) -> tuple[Signal, ...] | list[Signal]:
+    """The signals ``s`` reads in the same tick."""
+    if isinstance(s, InputSignal):
+        return (s._source,) if s._source is not None else ()
+    return s._deps if s._mode == FUNCTION else ()  # type: ignore[attr-defined]
+
+
+def _readers(s: Signal) -> list[Signal]:
+    """The signals that read ``s`` in the same tick."""
+    return [d for d in s._dependants if not isinstance(d, OutputSignal) or d._mode == FUNCTION]
+
+
 def _refuse_cycle(source: Signal, reader: Signal, action: str) -> None:
     """Raise CycleError if ``reader`` reading ``source`` would close a same-tick cycle,
-    that is if ``source`` already depends on ``reader``."""
+    that is if ``source`` already depends on ``reader``.
+
+    Searches from both ends at once, one signal at a time each way (upstream of
+    ``source``, downstream of ``reader``), and stops when either side is exhausted, so
+    the cost is that of the smaller side: building a long chain in either order stays
+    linear.
+    """
     if source is reader:
         raise CycleError(f"{action} would make {reader.name} read itself", [reader.name] * 2)
-    parent: dict[int, Signal | None] = {id(source): None}
-    stack = [source]
-    while stack:
-        s = stack.pop()
-        for d in s.dependencies if not isinstance(s, OutputSignal) or s._mode == FUNCTION else ():
-            if id(d) in parent:
-                continue
-            parent[id(d)] = s
-            if d is reader:
-                chain = [d]
-                p: Signal | None = s
-                while p is not None:
-                    chain.append(p)
-                    p = parent[id(p)]
-                # chain lists reader, the signal reading it, ..., source: reversed, each
-                # element reads the next, and the new edge makes reader read source.
-                names = [x.name for x in reversed(chain)]
-                cycle = [*names, names[0]]
-                raise CycleError(
-                    f"{action} would close a same-tick cycle: "
-                    + " -> ".join(cycle)
-                    + " (each reads the next; break it with a Delay entity or a state signal)",
-                    cycle,
-                )
-            stack.append(d)
+    # up[x] = the signal that reads x (towards source); down[x] = the signal x reads
+    # (towards reader)
+    up: dict[int, Signal | None] = {id(source): None}
+    down: dict[int, Signal | None] = {id(reader): None}
+    nodes: dict[int, Signal] = {id(source): source, id(reader): reader}
+    up_stack, down_stack = [source], [reader]
+    meet: int | None = None
+    while up_stack and down_stack and meet is None:
+        s = up_stack.pop()
+        for d in _reads(s):
+            if id(d) not in up:
+                up[id(d)] = s
+                nodes[id(d)] = d
+                if id(d) in down:
+                    meet = id(d)
+                    break
+                up_stack.append(d)
+        if meet is not None:
+            break
+        s = down_stack.pop()
+        for d in _readers(s):
+            if id(d) not in down:
+                down[id(d)] = s
+                nodes[id(d)] = d
+                if id(d) in up:
+                    meet = id(d)
+                    break
+                down_stack.append(d)
+    if meet is None:
+        return
+    # source reads ... reads meet (walk up[] from meet to source), and meet reads ...
+    # reads reader (walk down[] from meet to reader).
+    head: list[Signal] = []
+    x: Signal | None = nodes[meet]
+    while x is not None:
+        head.append(x)
+        x = up[id(x)]
+    head.reverse()  # source, ..., meet
+    x = down[meet]
+    while x is not None:
+        head.append(x)
+        x = down[id(x)]
+    names = [n.name for n in head]  # each reads the next; reader would read source
+    cycle = [*names, names[0]]
+    shown = (
+        cycle if len(cycle) <= 13 else [*cycle[:6], f"... {len(cycle) - 12} more ...", *cycle[-6:]]
+    )
+    raise CycleError(
+        f"{action} would close a same-tick cycle of {len(names)} signals: "
+        + " -> ".join(shown)
+        + " (each reads the next; break it with a Delay entity or a state signal)",
+        cycle,
+    )
 
 
 def _check_period(sig: Signal, period: Any) -> int:

@@ -69,7 +69,7 @@ class Tracer(Entity):
                 f"{sig.type.name} values have no numeric form"
             )
         label = name or sig.path
-        if any(label == n for n, _ in self._columns):
+        if label in self.columns():
             raise SotpyError(f"{self.className}({self.name}).add: {label!r} is already traced")
         if self._count:
             raise SotpyError(
@@ -87,7 +87,7 @@ class Tracer(Entity):
     @command
     def remove(self, name: str) -> None:
         """Stop tracing the column called ``name``."""
-        for i, (label, sig) in enumerate(self._columns):
+        for i, (label, _sig) in enumerate(self._columns):
             if label == name:
                 if self._count:
                     raise SotpyError(
@@ -158,7 +158,7 @@ class Tracer(Entity):
         self._ticks = np.empty(self._size, dtype=np.int64)
         self._buffers = [
             np.empty((self._size, self._width(label, sig, v).size))
-            for (label, sig), v in zip(self._columns, values)
+            for (label, sig), v in zip(self._columns, values, strict=True)
         ]
 
     def _width(self, label: str, sig: Signal, v: Any) -> Any:
@@ -177,7 +177,7 @@ class Tracer(Entity):
         if self._buffers is None:
             self._allocate(values)
         row = self._head
-        if row == self._size:
+        if self._count == self._size:  # full
             if self._overflow == "raise":
                 raise TracerOverflow(
                     f"{self.className}({self.name}): buffer of {self._size} rows is full at "
@@ -185,19 +185,24 @@ class Tracer(Entity):
                 )
             if not self.full:
                 self.full = True
-                what = "stopped recording" if self._overflow == "stop" else "overwrites the oldest rows"
+                what = (
+                    "stopped recording"
+                    if self._overflow == "stop"
+                    else "overwrites the oldest rows"
+                )
                 warnings.warn(
                     f"{self.className}({self.name}): buffer of {self._size} rows is full at tick "
                     f"{t}; it {what} (see .dropped)",
                     SotpyWarning,
                     stacklevel=2,
                 )
-            self.dropped += 1
+            self.dropped += 1  # a row not kept ("stop") or overwritten ("ring")
             if self._overflow == "stop":
                 return
-            row = 0
+            if row == self._size:
+                row = 0
         self._ticks[row] = t
-        for (label, sig), buf, v in zip(self._columns, self._buffers, values):  # type: ignore[arg-type]
+        for (label, sig), buf, v in zip(self._columns, self._buffers, values, strict=True):  # type: ignore[arg-type]
             a = self._width(label, sig, v)
             if a.size != buf.shape[1]:
                 raise SignalTypeError(
@@ -230,7 +235,7 @@ class Tracer(Entity):
             out["tick"] = ticks.copy()
         else:
             out["time"] = ticks.copy()
-        for (label, _), buf in zip(self._columns, self._buffers):
+        for (label, _), buf in zip(self._columns, self._buffers, strict=True):
             out[label] = buf[order].copy()
         return out
 

@@ -43,7 +43,7 @@ class SignalType:
             when the type cannot be traced.
     """
 
-    __slots__ = ("name", "convert", "to_array")
+    __slots__ = ("convert", "name", "to_array")
 
     def __init__(
         self,
@@ -70,7 +70,7 @@ def _np():
 
 
 def _as_double(v: Any) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) and not _is_np_real(v):
+    if isinstance(v, bool) or (not isinstance(v, (int, float)) and not _is_np_real(v)):
         raise TypeError(f"expected a real number, got {type(v).__name__} {v!r}")
     x = float(v)
     if math.isnan(x):
@@ -149,9 +149,7 @@ _BY_NAME: dict[str, SignalType] = {
 }
 
 
-def object_type(
-    name: str, cls: type, to_array: Callable[[Any], Any] | None = None
-) -> SignalType:
+def object_type(name: str, cls: type, to_array: Callable[[Any], Any] | None = None) -> SignalType:
     """Make (once) and return the signal type of instances of ``cls``.
 
     Calling it again with the same name returns the same type object, so two layers
