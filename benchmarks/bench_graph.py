@@ -84,13 +84,10 @@ def floor_function(src: BenchSource, nodes: list[BenchAdd]):
     return ns["floor"]
 
 
-def _median_ns(fn, ticks: int, repeats: int, n: int) -> float:
-    samples = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn(ticks)
-        samples.append((time.perf_counter() - t0) / ticks / n * 1e9)
-    return statistics.median(samples)
+def _time_ns(fn, ticks: int, n: int) -> float:
+    t0 = time.perf_counter()
+    fn(ticks)
+    return (time.perf_counter() - t0) / ticks / n * 1e9
 
 
 def measure(n: int, repeats: int = 7) -> dict[str, float]:
@@ -138,13 +135,37 @@ def measure(n: int, repeats: int = 7) -> dict[str, float]:
     run_lazy(1)
     assert floor(float(clock[0])) == last.value, "lazy pull and floor disagree"
     assert all(e.s.time == clock[0] for e in nodes), "the lazy pull left a signal outdated"
-    return {
-        "n": n,
-        "floor": _median_ns(run_floor, ticks, repeats, n),
-        "plan": _median_ns(run_plan, ticks, repeats, n),
-        "lazy": _median_ns(run_lazy, ticks, repeats, n),
-        "reread": _median_ns(run_reread, 20_000, repeats, 1),
-    }
+    # Interleave the paths in each repeat and take ratios within a repeat: the machine's
+    # speed drifts between repeats, much less within one.
+    samples: dict[str, list[float]] = {"floor": [], "plan": [], "lazy": [], "reread": []}
+    ratios: dict[str, list[float]] = {"plan": [], "lazy": []}
+    for _ in range(repeats):
+        f = _time_ns(run_floor, ticks, n)
+        p = _time_ns(run_plan, ticks, n)
+        lz = _time_ns(run_lazy, ticks, n)
+        samples["floor"].append(f)
+        samples["plan"].append(p)
+        samples["lazy"].append(lz)
+        samples["reread"].append(_time_ns(run_reread, 20_000, 1))
+        ratios["plan"].append(p / f)
+        ratios["lazy"].append(lz / f)
+    row = {key: statistics.median(v) for key, v in samples.items()}
+    row["n"] = n
+    row["plan/floor"] = statistics.median(ratios["plan"])
+    row["lazy/floor"] = statistics.median(ratios["lazy"])
+    row["compile_us"] = _compile_us(sinks, n)
+    return row
+
+
+def _compile_us(sinks, n: int) -> float:
+    """Microseconds per signal to compile a plan (sort and group the steps)."""
+    best = float("inf")
+    for _ in range(3):
+        plan = Plan(sinks)
+        t0 = time.perf_counter()
+        plan.compile()
+        best = min(best, (time.perf_counter() - t0) / n * 1e6)
+    return best
 
 
 def _cpu() -> str:
@@ -163,14 +184,18 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     parser.add_argument("--quick", action="store_true", help="sizes 10 and 100 only")
     args = parser.parse_args(argv)
     sizes = (10, 100) if args.quick else (10, 100, 1000, 10_000)
-    rows = [measure(n, repeats=3 if args.quick else 7) for n in sizes]
+    rows = [measure(n, repeats=3 if args.quick else 9) for n in sizes]
     print(f"machine: {_cpu()}, {os.cpu_count()} cores, Python {platform.python_version()}")
-    print("| signals | floor ns | plan ns | plan/floor | lazy ns | lazy/floor | re-read ns |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
+    print(
+        "| signals | floor ns | plan ns | plan/floor | lazy ns | lazy/floor | re-read ns "
+        "| plan compile us/signal |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(
-            f"| {r['n']:,} | {r['floor']:.0f} | {r['plan']:.0f} | {r['plan'] / r['floor']:.2f} "
-            f"| {r['lazy']:.0f} | {r['lazy'] / r['floor']:.2f} | {r['reread']:.0f} |"
+            f"| {r['n']:,} | {r['floor']:.0f} | {r['plan']:.0f} | {r['plan/floor']:.2f} "
+            f"| {r['lazy']:.0f} | {r['lazy/floor']:.2f} | {r['reread']:.0f} "
+            f"| {r['compile_us']:.1f} |"
         )
     return rows
 

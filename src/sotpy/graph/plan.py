@@ -2,9 +2,14 @@
 
 A control loop evaluates the same graph every tick. A :class:`Plan` for a set of sink
 signals is compiled when the topology changes (:attr:`Pool.version`): the outputs the
-sinks depend on are sorted topologically (Kahn-style, with an explicit stack, so a
-10,000-signal chain compiles without recursion) and turned into one straight-line
-Python function, so that a tick costs one comparison and one callback call per signal.
+sinks depend on are sorted topologically (depth-first with an explicit stack, so a
+10,000-signal chain compiles without recursion) and grouped into segments of steps of
+the same kind, each run by a loop specialised for it, so that a tick costs one
+comparison, one callback call and three stores per signal.
+
+Compiling costs about as much as a few ticks (no code generation: Python's ``compile``
+measured 40-60 us per step here, a stall a 1 kHz loop cannot take when a task is pushed
+while it runs; the segment loops measured within 15% of generated code).
 
 Each step of the plan is one of two kinds:
 
@@ -42,7 +47,7 @@ class Plan:
     of them would) and advances the clock to ``t``.
     """
 
-    __slots__ = ("_sinks", "_tick", "_version", "source", "steps")
+    __slots__ = ("_segments", "_sinks", "_version", "steps")
 
     def __init__(self, sinks: Iterable[Signal]) -> None:
         sinks = tuple(sinks)
@@ -51,9 +56,8 @@ class Plan:
                 raise PlugError(f"a plan evaluates signals; got {s!r}")
         self._sinks = sinks
         self._version = -1
-        self._tick: Callable[[int], None] | None = None
+        self._segments: list[tuple[Callable[[list[Any], int], None], list[Any]]] = []
         self.steps: list[OutputSignal] = []
-        self.source = ""
 
     @property
     def sinks(self) -> tuple[Signal, ...]:
@@ -66,55 +70,71 @@ class Plan:
             self.compile()
         if t > pool.time:
             pool.time = t
-        self._tick(t)  # type: ignore[misc]
+        for run_segment, items in self._segments:
+            run_segment(items, t)
 
     def compile(self) -> None:
-        """Sort the needed outputs and generate the tick function.
+        """Sort the needed outputs and group them into segments.
 
         Raises:
             UnpluggedError: listing every unset input the sinks depend on.
         """
         order, live = _topological(self._sinks)
-        lines: list[str] = []
-        ns: dict[str, Any] = {}
-        index = {id(s): i for i, s in enumerate(order)}
-        holders: dict[int, str] = {}
-        for i, s in enumerate(order):
-            ns[f"s{i}"] = s
-        for i, s in enumerate(order):
-            if live[i] and s.period == 1:
-                args = []
-                for src in s._srcs:
-                    j = index.get(id(src))
-                    if j is not None:
-                        name = f"s{j}"
-                    elif id(src) in holders:
-                        name = holders[id(src)]
-                    else:
-                        name = holders[id(src)] = f"c{len(holders)}"
-                        ns[name] = src
-                    args.append(f"{name}._value")
-                if s._withTime:
-                    args.insert(0, "t")
-                ns[f"f{i}"] = s._fn
-                lines.append(f" if s{i}._checked < t:")
-                lines.append(f"  s{i}._value = f{i}({', '.join(args)})")
-                lines.append(f"  s{i}._time = s{i}._checked = t")
+        segments: list[tuple[Callable[[list[Any], int], None], list[Any]]] = []
+        for s, is_live in zip(order, live, strict=True):
+            srcs = s._srcs
+            if not is_live:
+                kind, item = _run_checked, s
+            elif s._withTime:
+                kind, item = _run_live_n, (s, s._fn, srcs, True)
+            elif len(srcs) == 2:
+                kind, item = _run_live_2, (s, s._fn, srcs[0], srcs[1])
+            elif len(srcs) == 1:
+                kind, item = _run_live_1, (s, s._fn, srcs[0])
             else:
-                lines.append(f" if s{i}._checked < t: s{i}._update(t)")
-        # The objects the steps use are bound as default arguments: locals are the
-        # fastest names CPython has.
-        params = "".join(f", {name}={name}" for name in ns)
-        source = "\n".join([f"def _tick(t{params}):", *lines, " return None"])
-        exec(compile(source, "<sotpy plan>", "exec"), ns)
-        self._tick = ns["_tick"]
+                kind, item = _run_live_n, (s, s._fn, srcs, False)
+            if segments and segments[-1][0] is kind:
+                segments[-1][1].append(item)
+            else:
+                segments.append((kind, [item]))
+        self._segments = segments
         self.steps = order
-        self.source = source
         self._version = pool.version
 
     def __repr__(self) -> str:
         names = ", ".join(s.path for s in self._sinks)
         return f"<Plan of {len(self.steps)} steps for {names}>"
+
+
+# Segment runners. A live step of period 1 is recomputed when it has not been at ``t``
+# yet; the loops are specialised by arity so that the common steps cost one comparison,
+# one call and three stores.
+def _run_live_2(items: list[Any], t: int) -> None:
+    for s, fn, a, b in items:
+        if s._checked < t:
+            s._value = fn(a._value, b._value)
+            s._time = s._checked = t
+
+
+def _run_live_1(items: list[Any], t: int) -> None:
+    for s, fn, a in items:
+        if s._checked < t:
+            s._value = fn(a._value)
+            s._time = s._checked = t
+
+
+def _run_live_n(items: list[Any], t: int) -> None:
+    for s, fn, srcs, with_time in items:
+        if s._checked < t:
+            args = [x._value for x in srcs]
+            s._value = fn(t, *args) if with_time else fn(*args)
+            s._time = s._checked = t
+
+
+def _run_checked(items: list[Any], t: int) -> None:
+    for s in items:
+        if s._checked < t:
+            s._update(t)
 
 
 def compilePlan(sinks: Iterable[Signal]) -> Plan:
