@@ -3,6 +3,7 @@
 ::
 
     sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S]
+    sotpy robots
 
 Each sub-command is a function ``add_<name>(subparsers)`` that adds its parser and sets
 ``func`` (the function run with the parsed arguments, returning the exit code); add a
@@ -103,7 +104,51 @@ def add_demo(subparsers: Any) -> None:
     p.set_defaults(func=_run_demo)
 
 
-SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo]
+# -- robots ----------------------------------------------------------------------------
+def _robots_run(args: argparse.Namespace) -> int:
+    from .dynamics.robot import RobotError, list_robots, robot_summary
+
+    rows = [("robot", "nv", "actuated", "base", "source", "operational points")]
+    failed = 0
+    for name in list_robots():
+        try:
+            s = robot_summary(name)
+        except RobotError as exc:
+            print(f"sotpy robots: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        rows.append(
+            (
+                s["name"],
+                str(s["nv"]),
+                str(s["actuated"]),
+                "floating" if s["floating_base"] else "fixed",
+                s["source"],
+                ", ".join(f"{op}={frame}" for op, frame in s["opPoints"].items()),
+            )
+        )
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]) - 1)]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r[:-1], widths, strict=True)) + "  " + r[-1])
+    print(
+        "nv: velocity-space dimension (6 for a floating base + joints); actuated: joints "
+        "minus couplings (e.g. Nao's HipYawPitch pair, mimic fingers)"
+    )
+    return 1 if failed else 0
+
+
+def add_robots(subparsers: Any) -> None:
+    """``sotpy robots``: the shipped robot descriptions."""
+    p = subparsers.add_parser(
+        "robots",
+        help="list the robots sotpy ships",
+        description="List the shipped robots: degrees of freedom, base, model source and "
+        "operational points (SoT name=Pinocchio frame). Loads each model (a few seconds).",
+    )
+    p.set_defaults(func=_robots_run)
+
+
+SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots]
 
 
 # -- entry point -----------------------------------------------------------------------

@@ -67,5 +67,25 @@ class TracerOverflow(SotpyError):
     """A tracer buffer is full and the tracer was configured to raise."""
 
 
+class SimulationError(SotpyError):
+    """A simulated device could not step (its state would stop being finite); the
+    state is left as it was."""
+
+
+class RobotError(SotpyError):
+    """Loading or describing a robot failed."""
+
+
+class RobotNotFoundError(RobotError):
+    """No robot description of that name; the message lists the known robots."""
+
+
+class RobotDescriptionError(RobotError):
+    """A robot description or its model file is missing, malformed or inconsistent.
+
+    The message names the file and the problem.
+    """
+
+
 class SotpyWarning(UserWarning):
     """Warnings emitted by sotpy (e.g. a tracer buffer that filled up)."""

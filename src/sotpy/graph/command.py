@@ -46,6 +46,7 @@ class Command:
         self.__doc__ = inspect.cleandoc(fn.__doc__ or "")
         self.signature = inspect.signature(fn)
         self._converters: dict[str, Callable[[Any], Any]] | None = None
+        self._fast: tuple[int, int, list[tuple[str, Any]]] | None = None
 
     def __set_name__(self, owner: type, name: str) -> None:
         if not self._explicit_name:
@@ -73,27 +74,51 @@ class Command:
 
     def call(self, entity: Any, args: tuple[Any, ...], kwargs: dict[str, Any]) -> Any:
         """Check and convert the arguments, then run the command."""
+        fast = self._fast
+        if fast is None:
+            fast = self._fast = self._make_fast_path()
+        if not kwargs and fast[0] <= len(args) <= fast[1]:
+            # positional call of a plain signature: no binding needed
+            positional = fast[2]
+            converted = list(args)
+            for i, (name, convert) in enumerate(positional[: len(args)]):
+                if convert is not None:
+                    converted[i] = self._convert(entity, name, convert, args[i])
+            return self.fn(entity, *converted)
         try:
             bound = self.signature.bind(entity, *args, **kwargs)
         except TypeError as exc:
             raise CommandError(
                 f"{_who(entity)}.{self.name}: {exc}; usage: {self.usage()}"
             ) from None
-        converters = self._converters
-        if converters is None:
-            converters = self._converters = self._make_converters()
         arguments = bound.arguments
-        for name, convert in converters.items():
+        for name, convert in self._converters_map().items():
             if name in arguments:
-                value = arguments[name]
-                try:
-                    arguments[name] = convert(value)
-                except (TypeError, ValueError) as exc:
-                    raise CommandError(
-                        f"{_who(entity)}.{self.name}: argument {name!r}: {exc}; "
-                        f"usage: {self.usage()}"
-                    ) from None
+                arguments[name] = self._convert(entity, name, convert, arguments[name])
         return self.fn(*bound.args, **bound.kwargs)
+
+    def _convert(self, entity: Any, name: str, convert: Callable[[Any], Any], value: Any) -> Any:
+        try:
+            return convert(value)
+        except (TypeError, ValueError) as exc:
+            raise CommandError(
+                f"{_who(entity)}.{self.name}: argument {name!r}: {exc}; usage: {self.usage()}"
+            ) from None
+
+    def _converters_map(self) -> dict[str, Callable[[Any], Any]]:
+        if self._converters is None:
+            self._converters = self._make_converters()
+        return self._converters
+
+    def _make_fast_path(self) -> tuple[int, int, list[tuple[str, Any]]]:
+        """(fewest, most positional arguments, [(name, converter)]) for signatures made
+        only of positional-or-keyword parameters; (1, 0, []) disables the fast path."""
+        params = list(self.signature.parameters.values())[1:]
+        if any(p.kind is not p.POSITIONAL_OR_KEYWORD for p in params):
+            return (1, 0, [])
+        converters = self._converters_map()
+        required = sum(1 for p in params if p.default is p.empty)
+        return (required, len(params), [(p.name, converters.get(p.name)) for p in params])
 
     def _make_converters(self) -> dict[str, Callable[[Any], Any]]:
         try:

@@ -167,7 +167,10 @@ class EntityMeta(type):
         try:
             obj.__init__(name, *args, **kwargs)
         except BaseException:
-            obj._detach()
+            try:
+                obj.onRemove()  # release what the failed __init__ may have started
+            finally:
+                obj._detach()
             raise
         pool.register(obj)
         return obj
@@ -216,6 +219,11 @@ class Entity(metaclass=EntityMeta):
         for spec in self._specs.values():
             if isinstance(spec, Output) and spec.deps:
                 self._signals[spec.name].setDependencies([self._signals[d] for d in spec.deps])
+
+    def onRemove(self) -> None:
+        """Called when the entity leaves the pool (``pool.remove``, ``pool.clear``, or a
+        construction that raised): release what it holds outside the graph (threads,
+        processes, files). It may run on a partly built entity."""
 
     def _detach(self) -> None:
         """Unplug everything connected to this entity (it is being removed)."""

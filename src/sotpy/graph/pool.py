@@ -70,6 +70,7 @@ class Pool:
     def remove(self, entity: Entity | str) -> None:
         """Unplug every input of ``entity`` fed by it or feeding it, and drop it."""
         e = self.getEntity(entity if isinstance(entity, str) else entity.name)
+        e.onRemove()
         e._detach()
         del self._entities[e.name]
         self.version += 1
@@ -77,6 +78,7 @@ class Pool:
     def clear(self) -> None:
         """Forget every entity and reset the clock (tests start from here)."""
         for e in list(self._entities.values()):
+            e.onRemove()
             e._detach()
         self._entities.clear()
         self.time = 0

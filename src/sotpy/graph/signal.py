@@ -437,6 +437,16 @@ class InputSignal(Signal):
             self._retarget()
         _invalidate_dependants(self)
 
+    def setDefault(self, value: Any) -> None:
+        """Hold ``value`` when not plugged (now, if unset, and after :meth:`unplug`).
+
+        For defaults that depend on the entity (a zero vector of the robot's size).
+        """
+        v = self._convert(value)
+        self._default = v
+        if self._mode == UNSET:
+            self.setConstant(v)
+
     def plug(self, source: OutputSignal) -> None:
         """Follow ``source`` from now on (same as ``plug(source, self)``)."""
         plug(source, self)
