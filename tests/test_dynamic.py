@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import copy
 
-import example_robot_data
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from sotpy.dynamics.dynamic import Dynamic
+from sotpy.dynamics.robot import list_robots, load_model
 from sotpy.dynamics.types import SE3
 from sotpy.errors import CommandError, EntityError, SignalNotFoundError, SignalTypeError, SotpyError
 from sotpy.graph import VECTOR, Entity, Output, Plan, plug
@@ -30,9 +30,10 @@ FRAMES = {
     "romeo": ["l_ankle", "r_ankle", "LWristPitch", "RWristPitch", "gaze", "torso"],
     "panda": ["panda_hand_tcp", "panda_link4", "panda_joint2"],
     "ur5": ["tool0", "wrist_2_link", "ee_link"],
+    "nao": ["l_sole", "r_sole", "l_gripper", "r_gripper", "gaze", "torso"],
 }
 ROBOTS = list(FRAMES)
-FREE_FLYERS = ["talos", "romeo"]
+FREE_FLYERS = ["talos", "romeo", "nao"]
 EPS = 1e-5  # central finite-difference step
 
 
@@ -45,7 +46,9 @@ class DynamicTestSource(Entity):
 @pytest.fixture(scope="module")
 def models() -> dict[str, pin.Model]:
     """Each robot's model, loaded once for the module."""
-    return {name: example_robot_data.load(name).model for name in ROBOTS}
+    # every shipped robot: example-robot-data's, and the Nao-class URDF shipped in sotpy
+    assert sorted(ROBOTS) == sorted(list_robots())
+    return {name: load_model(name)[0] for name in ROBOTS}
 
 
 def random_q(model: pin.Model, rng: np.random.Generator) -> np.ndarray:
