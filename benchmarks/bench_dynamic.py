@@ -26,8 +26,6 @@ ratios are taken within a repeat and the table gives medians. Usage::
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import time
 from collections.abc import Callable
@@ -37,6 +35,7 @@ import example_robot_data
 import numpy as np
 import pinocchio as pin
 
+from sotpy._bench import machine_line
 from sotpy.dynamics.dynamic import Dynamic
 from sotpy.graph import VECTOR, Entity, Output, Plan, plug, pool
 
@@ -212,17 +211,6 @@ def measure(robot: str, dynamics: bool = False, ticks: int = 2000, repeats: int 
     return row
 
 
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def main(argv: list[str] | None = None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--quick", action="store_true", help="fewer ticks and repeats")
@@ -233,10 +221,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for robot in OP_POINTS
         for dynamics in (False, True)
     ]
-    print(
-        f"machine: {_cpu()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"Pinocchio {pin.__version__}"
-    )
+    print(machine_line(f"Pinocchio {pin.__version__}"))
     print(
         "| robot | nv | outputs | plan steps | floor us/tick | plan us/tick | plan/floor "
         "| lazy us/tick | lazy/floor |"

@@ -20,12 +20,11 @@ taken within the same run. Usage::
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import random
 import statistics
 import time
 
+from sotpy._bench import machine_line
 from sotpy.graph import DOUBLE, Entity, Input, Output, Plan, plug, pool
 
 
@@ -168,24 +167,13 @@ def _compile_us(sinks, n: int) -> float:
     return best
 
 
-def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--quick", action="store_true", help="sizes 10 and 100 only")
     args = parser.parse_args(argv)
     sizes = (10, 100) if args.quick else (10, 100, 1000, 10_000)
     rows = [measure(n, repeats=3 if args.quick else 9) for n in sizes]
-    print(f"machine: {_cpu()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    print(machine_line())
     print(
         "| signals | floor ns | plan ns | plan/floor | lazy ns | lazy/floor | re-read ns "
         "| plan compile us/signal |"

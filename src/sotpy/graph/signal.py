@@ -659,6 +659,26 @@ def _readers(s: Signal) -> list[Signal]:
     return [d for d in s._dependants if not isinstance(d, OutputSignal) or d._mode == FUNCTION]
 
 
+def _search_step(
+    stack: list[Signal],
+    seen: dict[int, Signal | None],
+    other: dict[int, Signal | None],
+    neighbours: Callable[[Signal], Iterable[Signal]],
+    nodes: dict[int, Signal],
+) -> int | None:
+    """Expand one signal of one side of :func:`_refuse_cycle`'s search; return the id of
+    a signal the other side has reached, if any."""
+    s = stack.pop()
+    for d in neighbours(s):
+        if id(d) not in seen:
+            seen[id(d)] = s
+            nodes[id(d)] = d
+            if id(d) in other:
+                return id(d)
+            stack.append(d)
+    return None
+
+
 def _refuse_cycle(source: Signal, reader: Signal, action: str) -> None:
     """Raise CycleError if ``reader`` reading ``source`` would close a same-tick cycle,
     that is if ``source`` already depends on ``reader``.
@@ -678,26 +698,9 @@ def _refuse_cycle(source: Signal, reader: Signal, action: str) -> None:
     up_stack, down_stack = [source], [reader]
     meet: int | None = None
     while up_stack and down_stack and meet is None:
-        s = up_stack.pop()
-        for d in _reads(s):
-            if id(d) not in up:
-                up[id(d)] = s
-                nodes[id(d)] = d
-                if id(d) in down:
-                    meet = id(d)
-                    break
-                up_stack.append(d)
-        if meet is not None:
-            break
-        s = down_stack.pop()
-        for d in _readers(s):
-            if id(d) not in down:
-                down[id(d)] = s
-                nodes[id(d)] = d
-                if id(d) in up:
-                    meet = id(d)
-                    break
-                down_stack.append(d)
+        meet = _search_step(up_stack, up, down, _reads, nodes) or _search_step(
+            down_stack, down, up, _readers, nodes
+        )
     if meet is None:
         return
     # source reads ... reads meet (walk up[] from meet to source), and meet reads ...
