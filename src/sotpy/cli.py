@@ -17,6 +17,8 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from .demos import robot_options, robot_run
+
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
 
 
@@ -81,27 +83,28 @@ DEMOS: dict[
         _pendulum_options,
         _pendulum_run,
     ),
+    "robot": (
+        "a humanoid (default Talos) waves its arms and turns its head while standing; "
+        "--viewer shows it",
+        robot_options,
+        robot_run,
+    ),
 }
 
 
-def _run_demo(args: argparse.Namespace) -> int:
-    return DEMOS[args.name][2](args)
-
-
 def add_demo(subparsers: Any) -> None:
-    """``sotpy demo NAME [options]``."""
-    epilog = "\n".join(f"  {name}: {helptext}" for name, (helptext, _, _) in DEMOS.items())
+    """``sotpy demo NAME [options]``: one sub-parser per demo, with its own options."""
     p = subparsers.add_parser(
         "demo",
         help="run a demo",
-        description="Run a demo. Exit code 0 when it succeeds.",
-        epilog="demos:\n" + epilog,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run a demo. Exit code 0 when it succeeds. "
+        "'sotpy demo NAME --help' lists a demo's options.",
     )
-    p.add_argument("name", choices=sorted(DEMOS), help="which demo")
-    for _, options, _ in DEMOS.values():
-        options(p)
-    p.set_defaults(func=_run_demo)
+    names = p.add_subparsers(dest="name", metavar="NAME", required=True)
+    for name, (helptext, options, run) in DEMOS.items():
+        sp = names.add_parser(name, help=helptext, description=helptext)
+        options(sp)
+        sp.set_defaults(func=run)
 
 
 # -- robots ----------------------------------------------------------------------------
