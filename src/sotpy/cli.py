@@ -12,34 +12,13 @@ sub-command by writing one and listing it in :data:`SUBCOMMANDS`. Demos are list
 """
 
 import argparse
-import math
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .demos import robot_options, robot_run
+from .demos import finite_float, positive_float, robot_options, robot_run
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
-
-
-def _finite_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return v
 
 
 # -- demos -----------------------------------------------------------------------------
@@ -47,12 +26,12 @@ def _pendulum_options(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("pendulum demo")
     g.add_argument("--plot", metavar="PATH", help="save a plot of x, theta and force (PNG)")
     g.add_argument(
-        "--duration", type=_positive_float, default=10.0, metavar="S", help="simulated time, s"
+        "--duration", type=positive_float, default=10.0, metavar="S", help="simulated time, s"
     )
     g.add_argument(
-        "--theta0", type=_finite_float, default=0.1, metavar="RAD", help="initial angle, rad"
+        "--theta0", type=finite_float, default=0.1, metavar="RAD", help="initial angle, rad"
     )
-    g.add_argument("--dt", type=_positive_float, default=1e-3, metavar="S", help="time step, s")
+    g.add_argument("--dt", type=positive_float, default=1e-3, metavar="S", help="time step, s")
 
 
 def _pendulum_run(args: argparse.Namespace) -> int:

@@ -20,19 +20,38 @@ import math
 import sys
 from typing import Any
 
-__all__ = ["ROBOT_DEMO_DEFAULTS", "robot_options", "robot_run"]
+__all__ = [
+    "ROBOT_DEMO_DEFAULTS",
+    "finite_float",
+    "positive_float",
+    "robot_options",
+    "robot_run",
+]
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
 ROBOT_DEMO_DEFAULTS: dict[str, Any] = {"robot": "talos", "duration": 3.0, "dt": 1e-3}
 
 
-def _positive_float(text: str) -> float:
+def _number(text: str) -> float:
     try:
-        v = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    v = _number(text)
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number."""
+    v = _number(text)
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return v
 
 
@@ -54,14 +73,14 @@ def robot_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration",
-        type=_positive_float,
+        type=positive_float,
         default=d["duration"],
         metavar="S",
         help=f"simulated time, s (default {d['duration']:g})",
     )
     parser.add_argument(
         "--dt",
-        type=_positive_float,
+        type=positive_float,
         default=d["dt"],
         metavar="S",
         help=f"time step, s (default {d['dt']:g})",
