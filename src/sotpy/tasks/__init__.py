@@ -1,0 +1,52 @@
+"""Features, tasks and gains: what the solver stacks (SoT's ``sot/core`` features and
+tasks), and meta-tasks that build them.
+
+- features (:mod:`sotpy.tasks.features`): an error ``e``, its Jacobian ``J`` (LOCAL
+  Jacobians of :mod:`sotpy.dynamics` in, ``de/dt = J v + errordot``), rows selected by
+  SoT flags read left to right (``"111000"``: the first three rows);
+- tasks (:mod:`sotpy.tasks.task`): features stacked, with ``task = -gain e`` (equality,
+  ``J qdot = task``) or bounds ``lower <= J qdot <= upper`` (inequality): the contract a
+  solver reads, written in ``docs/tasks.md``;
+- :class:`GainAdaptive`: ``gain = a exp(-b |e|) + c``;
+- meta-tasks (:mod:`sotpy.tasks.meta_task`): ``MetaTaskKine6d``, ``MetaTaskKineCom``,
+  ``MetaTaskKinePosture``.
+"""
+
+from .features import (
+    FLAGS,
+    OPTICAL_FROM_XFORWARD,
+    FeatureAbstract,
+    FeatureGeneric,
+    FeatureJointLimits,
+    FeaturePose,
+    FeaturePoseSE3,
+    FeaturePosture,
+    FeatureVisualPoint,
+    Flags,
+    interactionMatrix,
+)
+from .gain import GainAdaptive
+from .meta_task import MetaTaskKine6d, MetaTaskKineCom, MetaTaskKinePosture, setGain
+from .task import Task, TaskAbstract, TaskInequality
+
+__all__ = [
+    "FLAGS",
+    "OPTICAL_FROM_XFORWARD",
+    "FeatureAbstract",
+    "FeatureGeneric",
+    "FeatureJointLimits",
+    "FeaturePose",
+    "FeaturePoseSE3",
+    "FeaturePosture",
+    "FeatureVisualPoint",
+    "Flags",
+    "GainAdaptive",
+    "MetaTaskKine6d",
+    "MetaTaskKineCom",
+    "MetaTaskKinePosture",
+    "Task",
+    "TaskAbstract",
+    "TaskInequality",
+    "interactionMatrix",
+    "setGain",
+]
