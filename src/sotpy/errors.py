@@ -67,6 +67,11 @@ class TracerOverflow(SotpyError):
     """A tracer buffer is full and the tracer was configured to raise."""
 
 
+class SolverError(SotpyError, ValueError):
+    """A hierarchy given to the solver is malformed (sizes, NaN/inf, lower > upper), or
+    its solution is not finite. The message names the level and the row."""
+
+
 class SimulationError(SotpyError):
     """A simulated device could not step (its state would stop being finite); the
     state is left as it was."""

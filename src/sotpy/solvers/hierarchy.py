@@ -1,0 +1,874 @@
+r"""Hierarchical (lexicographic) least squares with equalities and inequalities.
+
+The problem
+-----------
+A stack of ``p`` levels, level ``k`` being ``lower_k <= A_k x <= upper_k`` (``A_k`` of
+shape ``m_k x n``; a row with ``lower == upper`` is an equality, ``-inf``/``+inf`` a
+missing bound). The violation of level ``k`` at ``x`` is the vector
+
+.. math:: v_k(x) = \max(lower_k - A_k x, 0) + \max(A_k x - upper_k, 0)
+
+(the distance of each row to its interval). The lexicographic optimum is
+
+.. math::
+
+    S_0 = \mathbb{R}^n, \qquad
+    S_k = \arg\min_{x \in S_{k-1}} \|v_k(x)\|^2, \qquad
+    x^* = \arg\min_{x \in S_p} \|x\|^2 :
+
+each level's violation is minimised without degrading any level above it, and among
+the optimal points the minimum-norm one is returned. The optimal slack of a level is
+unique, so ``S_k`` is ``S_{k-1}`` with level ``k``'s rows pinned to their optimal
+violation.
+
+Damping
+-------
+With ``damping = lambda > 0``, level ``k`` is solved as damped least squares inside
+the set left by the levels above, starting from the previous level's point
+``x_{k-1}`` (``x_0 = 0``):
+
+.. math::
+
+    x_k = \arg\min_{x \in S_{k-1}} \|v_k(x)\|^2 + \lambda^2 \|x - x_{k-1}\|^2, \qquad
+    S_k = \{x \in S_{k-1} : A_k x \text{ has the violation of } A_k x_k\}
+
+and ``x^*`` is the minimum-norm point of ``S_p``. As in soth, damping is inside the
+level only: the levels below keep the exact null space of the levels above (for
+equality levels ``S_k = x_k + \mathrm{range}(Z_k)`` with ``Z_k`` the null space of
+``A_k`` in ``range(Z_{k-1})`` given by the rank threshold). For equality-only stacks
+the step of level ``k`` is ``M^T (M M^T + \lambda^2 I)^{-1} (b_k - A_k x_{k-1})``,
+``M = A_k Z_{k-1}``, and ``x^* = x_p``.
+
+Rank tolerance
+--------------
+Each equality block is factored by a column-pivoted QR of ``(A_k Z)^T``; its rank is
+the number of diagonal entries ``|R_ii| > rank_tol * ||A_k||_F`` (``rank_tol`` 1e-9 by
+default). The threshold is relative to the level's own matrix, not to ``A_k Z``, so
+that rows that depend on the levels above (``A_k Z`` pure round-off) get rank 0 and
+rows that conflict within a level are solved in the least-squares sense, exactly.
+
+Solution paths
+--------------
+* equality-only stacks: a reduced null-space recursion with LAPACK called directly
+  (``dgeqp3``, ``dormqr``, ``dtrtrs``/``dgels``) and preallocated buffers; undamped
+  runs of levels found of full row rank at the previous call are factored as one block
+  (split again if one of them lost rank);
+* with inequalities: first the equality rows of the whole stack (the *shortcut*); if
+  the point satisfies every inequality row it is the answer (it is optimal for a
+  relaxation and feasible). Otherwise level by level: the equality step ignoring the
+  level's inequality rows and the inequality rows frozen above, accepted if it
+  satisfies them, else a QP in the reduced coordinates ``x = x_{k-1} + Z y`` (one
+  persistent problem per level, DAQP by default, proxsuite as the alternative).
+  After a QP the level's equality rows, its violated inequality rows and (undamped)
+  the frozen rows with a nonzero multiplier are pinned as equalities (``Z`` shrinks);
+  its other inequality rows are frozen as ``lower + w* <= A x <= upper + w*``, widened
+  just enough to contain the current point (the QP met them to its tolerance). A last
+  QP (if needed) gives the minimum-norm point.
+
+See ``docs/solvers.md`` for the details and the measured costs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sotpy.errors import SolverError
+
+from ._cascade import DaqpQP, ProxQP, daqp_available
+from ._equality import NullspaceStepper
+
+__all__ = [
+    "HierarchyResult",
+    "HierarchySolver",
+    "SolverError",
+    "solve_hierarchy",
+]
+
+_F64 = np.dtype(np.float64)
+_BACKENDS = ("auto", "proxsuite", "daqp")
+
+
+class HierarchyResult:
+    """What :meth:`HierarchySolver.solve` returns.
+
+    Attributes:
+        x: the solution (length ``n``, a fresh array).
+        residuals: ``||v_k(x)||_2`` for every level ``k``: the violation of
+            ``lower_k <= A_k x <= upper_k`` at ``x``, in the units of ``A_k x``.
+        ranks: per level, the number of directions the level fixed (the rank of its
+            pinned rows in the null space of the levels above; 0 for a level whose
+            inequalities are inactive, and for every level with ``method="daqp"``).
+        method: ``"equality"`` (no inequality row), ``"shortcut"`` (inequalities, no
+            QP needed), ``"cascade"`` (some levels solved as QPs) or ``"daqp"``.
+        qp_levels: the levels solved by a QP (``"daqp"``: all of them).
+        iterations: total QP iterations.
+        converged: every QP reached its tolerance (``False``: the QP back-end stopped
+            at its iteration limit; ``x`` is its last iterate, still checked here).
+        tolerances: threshold of :attr:`satisfied`,
+            ``10 * eps * (1 + ||A_k||_F ||x||)`` per level.
+        satisfied: per level, ``residuals[k] <= tolerances[k]``.
+    """
+
+    __slots__ = (
+        "_eps",
+        "_fro",
+        "converged",
+        "iterations",
+        "method",
+        "qp_levels",
+        "ranks",
+        "residuals",
+        "x",
+        "xnorm",
+    )
+
+    def __init__(self, x, residuals, ranks, method, qp_levels, iterations, converged, fro, eps):
+        self.x = x
+        self.residuals = residuals
+        self.ranks = ranks
+        self.method = method
+        self.qp_levels = qp_levels
+        self.iterations = iterations
+        self.converged = converged
+        self.xnorm = math.sqrt(float(x @ x))
+        self._fro = fro
+        self._eps = eps
+
+    @property
+    def tolerances(self) -> np.ndarray:
+        return 10.0 * self._eps * (1.0 + self._fro * self.xnorm)
+
+    @property
+    def satisfied(self) -> np.ndarray:
+        return self.residuals <= self.tolerances
+
+    @property
+    def feasible(self) -> bool:
+        """Whether the first (hard) level is satisfied."""
+        return bool(self.satisfied[0]) if len(self.residuals) else True
+
+    @property
+    def all_satisfied(self) -> bool:
+        """Whether every level is satisfied."""
+        return bool(self.satisfied.all())
+
+    def __repr__(self) -> str:
+        return (
+            f"HierarchyResult(method={self.method!r}, residuals={self.residuals},"
+            f" satisfied={self.satisfied}, ranks={self.ranks}, qp_levels={self.qp_levels},"
+            f" iterations={self.iterations}, converged={self.converged})"
+        )
+
+
+class _Structure:
+    """What depends only on the row counts and row classes: stacked buffers, index
+    arrays, the plan of merged equality blocks, QP problems and their warm starts."""
+
+    __slots__ = (
+        "A",
+        "Aeq",
+        "Ain",
+        "active",
+        "all_eq",
+        "blocks",
+        "bufs",
+        "d",
+        "din",
+        "eq_bounds",
+        "eq_idx",
+        "hi_adj",
+        "in_idx",
+        "key",
+        "last",
+        "lo",
+        "lo_adj",
+        "loin",
+        "m_max",
+        "nonempty",
+        "nonempty_starts",
+        "qps",
+        "ref",
+        "rlo",
+        "rup",
+        "shortcut_ok",
+        "sizes",
+        "slices",
+        "starts",
+        "up",
+        "upin",
+        "warm",
+    )
+
+
+class HierarchySolver:
+    """Persistent hierarchical solver: buffers, QP problems and warm starts kept between
+    calls (an SOT entity keeps one and calls :meth:`solve` every tick).
+
+    Args:
+        n: number of variables (``None``: taken from the first solve).
+        damping: default damping ``lambda`` (see the module docstring).
+        rank_tol: relative rank threshold of the QR factorisations.
+        eps: absolute accuracy asked of the QP back-end (DAQP's primal tolerance,
+            proxsuite's ``eps_abs`` and duality gap, at least 1e-8) and the feasibility
+            tolerance of the shortcut: an inequality row may be exceeded by about
+            ``eps``.
+        backend: ``"auto"`` (proxsuite cascade), ``"proxsuite"``, or ``"daqp"`` (DAQP's
+            hierarchical mode; undamped stacks only, damped ones and DAQP failures fall
+            back to the proxsuite cascade).
+        shortcut: try the equality step first at every level with inequalities
+            (``False``: a QP at every such level; for testing).
+        check: validate the input up front (sizes are always checked; this adds
+            non-finite matrices and ``lower <= upper``). Non-finite values that reach
+            the solution are reported either way.
+        max_iter: iteration limit of each QP.
+    """
+
+    def __init__(
+        self,
+        n: int | None = None,
+        *,
+        damping: float = 0.0,
+        rank_tol: float = 1e-9,
+        eps: float = 1e-9,
+        backend: str = "auto",
+        shortcut: bool = True,
+        check: bool = True,
+        max_iter: int = 1000,
+    ):
+        if backend not in _BACKENDS:
+            raise SolverError(f"HierarchySolver: backend {backend!r} is not one of {_BACKENDS}")
+        if backend == "daqp" and not daqp_available():
+            raise SolverError("HierarchySolver: backend 'daqp' needs the 'daqp' package")
+        if backend == "auto":
+            backend = "daqp" if daqp_available() else "proxsuite"
+        _check_damping(damping)
+        if not (rank_tol > 0.0 and eps > 0.0):
+            raise SolverError(f"HierarchySolver: rank_tol ({rank_tol}) and eps ({eps}) must be > 0")
+        if n is not None and int(n) < 1:
+            raise SolverError(f"HierarchySolver: n must be >= 1, got {n}")
+        self.n = None if n is None else int(n)
+        self.damping = float(damping)
+        self.rank_tol = float(rank_tol)
+        self.eps = float(eps)
+        self.backend = backend
+        self.shortcut = bool(shortcut)
+        self.check = bool(check)
+        self.max_iter = int(max_iter)
+        self._stepper: NullspaceStepper | None = None
+        self._structure: _Structure | None = None
+        self._qp_class = DaqpQP if backend == "daqp" else ProxQP
+        # proxsuite stalls below about 1e-8 on the degenerate sets of frozen levels
+        self._qp_eps = self.eps if backend == "daqp" else max(self.eps, 1e-8)
+        self._fro = np.zeros(0)
+
+    # ----------------------------------------------------------------- public API
+    def reset(self) -> None:
+        """Forget buffers, QP problems and warm starts."""
+        self._stepper = None
+        self._structure = None
+
+    def solve(self, levels, damping: float | None = None) -> HierarchyResult:
+        """Solve the stack ``levels`` (highest priority first).
+
+        Each level is ``(A, lower, upper)`` or ``(A, b)`` (shorthand for
+        ``lower = upper = b``), with ``A`` of shape ``(m_k, n)``. ``damping`` overrides
+        the solver's default for this call. Raises :class:`SolverError` on malformed
+        input, naming the level and row.
+        """
+        if damping is None:
+            lam = self.damping
+        else:
+            lam = float(damping)
+            _check_damping(lam)
+        st, parsed = self._prepare(levels)
+        stepper = self._stepper
+        if stepper is None or stepper.m_max < st.m_max:
+            stepper = self._stepper = NullspaceStepper(self.n, st.m_max)
+        else:
+            stepper.reset()
+        if st.all_eq:
+            ranks = self._solve_equality(st, stepper, lam)
+            return self._result(st, parsed, stepper.x_aug, ranks, "equality", (), 0, True)
+        return self._solve_general(st, parsed, stepper, lam)
+
+    # ------------------------------------------------------------ input handling
+    def _prepare(self, levels):
+        """Copy the levels into the stacked buffers ``[A | -lower]``, ``upper``;
+        validate; classify rows."""
+        n = self.n
+        parsed = []
+        general = False
+        try:
+            for k, level in enumerate(levels):
+                nl = len(level)
+                if nl == 2:
+                    A, lo = level
+                    up = None
+                elif nl == 3:
+                    A, lo, up = level
+                    if up is lo:
+                        up = None
+                    else:
+                        general = True
+                else:
+                    raise SolverError(
+                        f"level {k}: expected (A, lower, upper) or (A, b), got {nl} items"
+                    )
+                if type(A) is not np.ndarray or A.dtype != _F64 or A.ndim != 2:
+                    A = _as_matrix(A, k)
+                if n is None:
+                    n = self.n = A.shape[1]
+                    if n < 1:
+                        raise SolverError(f"level {k}: A has no column")
+                m = A.shape[0]
+                if A.shape[1] != n:
+                    raise SolverError(
+                        f"level {k}: A has {A.shape[1]} columns, expected {n}"
+                        " (the number of variables)"
+                    )
+                if type(lo) is not np.ndarray or lo.shape != (m,) or lo.dtype != _F64:
+                    lo = _as_vector(lo, k, "b" if nl == 2 else "lower", m)
+                if up is not None and (
+                    type(up) is not np.ndarray or up.shape != (m,) or up.dtype != _F64
+                ):
+                    up = _as_vector(up, k, "upper", m)
+                parsed.append((A, lo, up))
+        except TypeError as exc:
+            raise SolverError(f"solve_hierarchy: levels must be a list of tuples ({exc})") from None
+        if n is None:
+            raise SolverError("solve_hierarchy: no level and no number of variables")
+        sizes = tuple(a.shape[0] for a, _, _ in parsed)
+        st = self._structure
+        if st is None or st.sizes != sizes or st.A.shape[1] != n + 1:
+            st = self._new_structure(sizes, n)
+        A_st, starts = st.A, st.starts
+        if general:
+            lo_st, up_st = st.lo, st.up
+            for k, (A, lo, up) in enumerate(parsed):
+                s, e = starts[k], starts[k + 1]
+                A_st[s:e, :n] = A
+                lo_st[s:e] = lo
+                up_st[s:e] = lo if up is None else up
+            # augmented column -ref, ref a finite bound of each row (the lower one, else
+            # the upper one, else 0): rlo = lower - ref and rup = upper - ref bound A x - ref
+            ref = st.ref
+            np.copyto(ref, lo_st)
+            nonfinite = ~np.isfinite(lo_st)
+            if nonfinite.any():
+                ref[nonfinite] = np.where(np.isfinite(up_st), up_st, 0.0)[nonfinite]
+            np.negative(ref, out=A_st[:, n])
+            np.subtract(lo_st, ref, out=st.rlo)
+            np.subtract(up_st, ref, out=st.rup)
+        else:
+            for k, (A, lo, _) in enumerate(parsed):
+                s, e = starts[k], starts[k + 1]
+                A_st[s:e, :n] = A
+                np.negative(lo, out=A_st[s:e, n])
+        # Frobenius norm of every level (the scale of its rank threshold)
+        if len(st.nonempty) == len(sizes):
+            An = A_st[:, :n]
+            fro2 = np.add.reduceat(np.einsum("ij,ij->i", An, An), st.nonempty_starts)
+            fro = np.sqrt(fro2)
+        else:
+            fro = np.zeros(len(sizes))
+            fro2 = fro
+            if len(st.nonempty):
+                An = A_st[:, :n]
+                fro2 = np.add.reduceat(np.einsum("ij,ij->i", An, An), st.nonempty_starts)
+                fro[st.nonempty] = np.sqrt(fro2)
+        if self.check and not math.isfinite(float(fro2.sum())):
+            _raise_nonfinite_matrix(parsed)
+        self._fro = fro
+        if general:
+            d = st.d
+            with np.errstate(invalid="ignore"):  # inf - inf: reported below
+                np.subtract(st.up, st.lo, out=d)
+            if self.check and not (d.min() >= 0.0):
+                _raise_bad_bounds(parsed)
+            key = (d == 0.0).tobytes()
+        else:
+            key = None
+        if key != st.key:
+            self._classify(st, key)
+        return st, parsed
+
+    def _new_structure(self, sizes: tuple[int, ...], n: int) -> _Structure:
+        st = _Structure()
+        st.sizes = sizes
+        starts = [0]
+        for m in sizes:
+            starts.append(starts[-1] + m)
+        st.starts = starts
+        st.slices = [slice(starts[k], starts[k + 1]) for k in range(len(sizes))]
+        mtot = starts[-1]
+        st.A = np.zeros((mtot, n + 1))
+        st.lo = np.zeros(mtot)
+        st.up = np.zeros(mtot)
+        st.d = np.zeros(mtot)
+        st.ref = np.zeros(mtot)
+        st.rlo = np.zeros(mtot)
+        st.rup = np.zeros(mtot)
+        st.nonempty = np.array([k for k, m in enumerate(sizes) if m > 0], dtype=np.intp)
+        st.nonempty_starts = np.array([starts[k] for k in st.nonempty], dtype=np.intp)
+        st.last = int(st.nonempty[-1]) if len(st.nonempty) else -1
+        st.m_max = max(mtot, 1)  # scratch rows: merged blocks, all inequality rows
+        st.key = b"\x00invalid"
+        st.qps = {}
+        st.warm = {}
+        st.blocks = [(k, k + 1) for k in range(len(sizes)) if sizes[k] > 0]
+        self._structure = st
+        return st
+
+    def _classify(self, st: _Structure, key: bytes | None) -> None:
+        """Row classes (equality / inequality) and the index arrays that go with them."""
+        st.key = key
+        st.qps = {}
+        st.warm = {}
+        st.bufs = {}
+        st.active = set()
+        st.shortcut_ok = True
+        mtot = st.A.shape[0]
+        eqm = np.ones(mtot, dtype=bool) if key is None else np.frombuffer(key, dtype=bool)
+        st.all_eq = bool(eqm.all())
+        st.eq_idx = eq_idx = np.flatnonzero(eqm)
+        st.in_idx = in_idx = np.flatnonzero(~eqm)
+        # per level (e0, e1, i0, i1): slices of the equality / inequality stacks
+        bounds = []
+        e = i = 0
+        for k in range(len(st.sizes)):
+            ne = int(eqm[st.slices[k]].sum())
+            ni = st.sizes[k] - ne
+            bounds.append((e, e + ne, i, i + ni))
+            e += ne
+            i += ni
+        st.eq_bounds = bounds
+        w = st.A.shape[1]
+        st.Aeq = np.empty((len(eq_idx), w))
+        st.Ain = np.empty((len(in_idx), w))
+        st.loin = np.empty(len(in_idx))
+        st.upin = np.empty(len(in_idx))
+        st.din = np.empty(len(in_idx))
+        st.lo_adj = np.empty(len(in_idx))
+        st.hi_adj = np.empty(len(in_idx))
+
+    # -------------------------------------------------------------- equality path
+    def _solve_equality(self, st: _Structure, stepper: NullspaceStepper, lam: float) -> np.ndarray:
+        """All rows are equalities: the null-space recursion, levels known to be of full
+        row rank (from the previous call) factored together when undamped."""
+        sizes, slices, A_st = st.sizes, st.slices, st.A
+        ranks = np.zeros(len(sizes), dtype=np.intp)
+        fro = self._fro
+        tol = self.rank_tol
+        last = st.last
+        step = stepper.step
+        for k0, k1 in st.blocks:
+            if stepper.nf == 0:
+                break
+            need = k1 - 1 != last
+            if k1 - k0 == 1:
+                ranks[k0] = step(A_st[slices[k0]], fro[k0], tol, lam, need)
+                continue
+            if lam == 0.0:
+                rows = A_st[st.starts[k0] : st.starts[k1]]
+                if step(rows, fro[k0:k1].min(), tol, 0.0, need, True) >= 0:
+                    ranks[k0:k1] = sizes[k0:k1]
+                    continue
+            for k in range(k0, k1):
+                if stepper.nf == 0:
+                    break
+                ranks[k] = step(A_st[slices[k]], fro[k], tol, lam, k != last)
+        if lam == 0.0:
+            st.blocks = _plan_blocks(sizes, ranks)
+        return ranks
+
+    # --------------------------------------------------------------- general path
+    def _solve_general(
+        self,
+        st: _Structure,
+        parsed,
+        stepper: NullspaceStepper,
+        lam: float,
+    ) -> HierarchyResult:
+        """Level by level: equality step + check (shortcut), else a QP; then the
+        minimum-norm point."""
+        eps = self.eps
+        tol = self.rank_tol
+        fro = self._fro
+        Aeq, Ain = st.Aeq, st.Ain
+        if len(st.eq_idx):
+            np.take(st.A, st.eq_idx, axis=0, out=Aeq)
+        np.take(st.A, st.in_idx, axis=0, out=Ain)
+        np.take(st.rlo, st.in_idx, out=st.loin)
+        np.take(st.rup, st.in_idx, out=st.upin)
+        lo_adj, hi_adj = st.lo_adj, st.hi_adj
+        np.copyto(lo_adj, st.loin)
+        np.copyto(hi_adj, st.upin)
+        ranks = np.zeros(len(st.sizes), dtype=np.intp)
+        x_aug = stepper.x_aug
+        if self.shortcut and st.shortcut_ok:
+            # the whole stack's equality rows; if the point satisfies every inequality
+            # row it is the answer (tried first when it was so at the previous call)
+            last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
+            for k, (e0, e1, _, _) in enumerate(st.eq_bounds):
+                if e1 > e0 and stepper.nf > 0:
+                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lam, k != last)
+            v = Ain @ x_aug
+            if (v >= lo_adj - eps).all() and (v <= hi_adj + eps).all():
+                return self._result(st, parsed, x_aug, ranks, "shortcut", (), 0, True)
+            stepper.reset()
+            ranks[:] = 0
+        qp_levels: list[int] = []
+        iterations = 0
+        converged = True
+        for k, (e0, e1, _i0, i1) in enumerate(st.eq_bounds):
+            if stepper.nf == 0:
+                break
+            if i1 == 0:
+                # no inequality row so far: plain equality step
+                if e1 > e0:
+                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lam)
+                continue
+            if self.shortcut and k not in st.active:
+                saved = _save(stepper)
+                r = stepper.step(Aeq[e0:e1], fro[k], tol, lam) if e1 > e0 else 0
+                v = Ain[:i1] @ x_aug
+                if (v >= lo_adj[:i1] - eps).all() and (v <= hi_adj[:i1] + eps).all():
+                    ranks[k] = r
+                    _widen(st, i1, v)  # the rows' intervals contain the current point
+                    continue
+                _restore(stepper, saved)
+            ranks[k], its, ok = self._qp_level(st, stepper, k, lam)
+            qp_levels.append(k)
+            iterations += its
+            converged = converged and ok
+        if stepper.nf > 0 and qp_levels:
+            its, ok = self._min_norm(st, stepper)
+            iterations += its
+            converged = converged and ok
+        method = "cascade" if qp_levels else "shortcut"
+        st.shortcut_ok = not qp_levels
+        return self._result(
+            st, parsed, x_aug, ranks, method, tuple(qp_levels), iterations, converged
+        )
+
+    def _qp_level(
+        self, st: _Structure, stepper: NullspaceStepper, k: int, lam: float
+    ) -> tuple[int, int, bool]:
+        """Level ``k`` as a QP in ``x = x_{k-1} + Z y``; freeze it; return (rank, its, ok).
+
+        Variables ``(y, w)``: ``min 1/2 ||A_E (x + Z y) - b_E||^2 + 1/2 ||w||^2
+        + 1/2 lambda^2 ||y||^2`` s.t. the frozen rows ``lo_adj <= A_F (x + Z y) - ref <=
+        hi_adj`` and ``lower <= A_I (x + Z y) - w <= upper`` for the level's inequality
+        rows (``ref``: a finite bound of each row, see ``_prepare``).
+        """
+        e0, e1, i0, i1 = st.eq_bounds[k]
+        eps = self.eps
+        x = stepper.x.copy()
+        Z = stepper.basis()
+        nf = stepper.nf
+        mi = i1 - i0
+        nv = nf + mi
+        buf = st.bufs.get(k)
+        if buf is None or buf[0].shape[0] != nv:
+            # constant parts: the slacks' identity in H, -I in C
+            H = np.zeros((nv, nv))
+            H[nf:, nf:].flat[:: mi + 1] = 1.0
+            C = np.zeros((i1, nv))
+            C[i0:i1, nf:].flat[:: mi + 1] = -1.0
+            buf = st.bufs[k] = (H, C, np.zeros(nv), np.empty(i1), np.empty(i1))
+        H, C, g, lo, up = buf
+        Hy = H[:nf, :nf]
+        if e1 > e0:
+            red = stepper.reduced(st.Aeq[e0:e1])  # [A_E Z | A_E x - b_E]
+            Me = red[:, :nf]
+            np.matmul(Me.T, Me, out=Hy)
+            np.matmul(Me.T, red[:, nf], out=g[:nf])
+        else:
+            Hy.fill(0.0)
+        if lam > 0.0:
+            Hy.flat[:: nf + 1] += lam * lam
+        red = stepper.reduced(st.Ain[:i1])  # [A_F Z | A_F x - ref]
+        C[:, :nf] = red[:, :nf]
+        v = red[:, nf]
+        np.subtract(st.lo_adj[:i0], v[:i0], out=lo[:i0])
+        np.subtract(st.hi_adj[:i0], v[:i0], out=up[:i0])
+        np.subtract(st.loin[i0:i1], v[i0:], out=lo[i0:])
+        np.subtract(st.upin[i0:i1], v[i0:], out=up[i0:])
+        # proxsuite: warm start from this level's previous solution mapped to these
+        # coordinates (DAQP reuses its previous working set instead)
+        v0 = z0 = None
+        warm = st.warm.get(k)
+        if warm is not None and self._qp_class is ProxQP:
+            xprev, wprev, zprev = warm
+            v0 = np.empty(nv)
+            v0[:nf] = Z.T @ (xprev - x)
+            v0[nf:] = wprev
+            z0 = zprev
+        sol, z, its, ok = self._run_qp(st, k, H, g, C, lo, up, v0, z0)
+        if not ok:
+            # the QP back-end failed: keep the previous point (it satisfies every level
+            # above), pin nothing, freeze the level's rows where they are; flagged in
+            # the result (converged=False)
+            st.warm.pop(k, None)
+            _widen(st, i1, st.Ain[:i1] @ stepper.x_aug)
+            return 0, its, False
+        w = np.array(sol[nf:])
+        z = np.array(z)
+        x += Z @ sol[:nf]
+        st.warm[k] = (x, w, z)
+        stepper.set_point(x)
+        # freeze: the level's equality rows, its violated inequality rows (w != 0) and
+        # the frozen rows above that the optimum leans on (multiplier != 0) are pinned
+        # where they are. The level's residual is unique over its optimal set, and along
+        # any direction that keeps it, a row with a nonzero multiplier cannot leave its
+        # bound (complementarity), so pinning those rows is exact (undamped only: with
+        # damping the multipliers also balance the damping term); it also lets the next
+        # levels' equality steps respect them (fewer QPs).
+        #
+        # Multipliers are used with DAQP only: its working set is exact (rows out of it
+        # have a zero multiplier), while proxsuite's are noisy at the 1e-8 level and a
+        # row pinned by mistake would cost the levels below.
+        tol_pin = 10.0 * eps
+        if lam == 0.0 and self._qp_class is DaqpQP:
+            za = np.abs(z)
+            if mi:
+                np.maximum(za[i0:], np.abs(w), out=za[i0:])
+        else:
+            za = np.zeros(i1)
+            za[i0:] = np.abs(w)
+        pinned = np.flatnonzero(za > tol_pin)
+        # rows are active at the optimum: next call, go straight to the QP (the
+        # equality step would violate them); the shortcut is tried again once not
+        if za.max(initial=0.0) > 0.0:
+            st.active.add(k)
+        else:
+            st.active.discard(k)
+        r = 0
+        if len(pinned):
+            rows = np.concatenate([st.Aeq[e0:e1], st.Ain[pinned]])
+            scale = math.sqrt(float(np.einsum("ij,ij->", rows[:, :-1], rows[:, :-1])))
+            r = stepper.step(rows, scale, self.rank_tol, freeze=True)
+        elif e1 > e0:
+            r = stepper.step(st.Aeq[e0:e1], self._fro[k], self.rank_tol, freeze=True)
+        if mi:
+            np.add(st.loin[i0:i1], w, out=st.lo_adj[i0:i1])
+            np.add(st.upin[i0:i1], w, out=st.hi_adj[i0:i1])
+        _widen(st, i1, st.Ain[:i1] @ stepper.x_aug)
+        return r, its, ok
+
+    def _run_qp(self, st, key, H, g, C, lo, up, v0, z0):
+        """Solve with the level's persistent QP; if DAQP fails, proxsuite once."""
+        qp = st.qps.get(key)
+        if qp is None:
+            qp = st.qps[key] = self._qp_class(self._qp_eps, self.max_iter)
+        sol, z = qp.solve(H, g, C, lo, up, v0, z0)
+        its, ok = qp.iterations, qp.status_ok
+        if not ok and self._qp_class is DaqpQP:
+            fallback = ProxQP(max(self.eps, 1e-8), 10 * self.max_iter)
+            sol, z = fallback.solve(H, g, C, lo, up)
+            its += fallback.iterations
+            ok = fallback.status_ok
+        return sol, z, its, ok
+
+    def _min_norm(self, st: _Structure, stepper: NullspaceStepper) -> tuple[int, bool]:
+        """Move to the minimum-norm point of ``x + range(Z)`` within the frozen rows."""
+        x = stepper.x.copy()
+        Z = stepper.basis()
+        c = Z.T @ x
+        stepper.set_point(x - Z @ c)
+        v = st.Ain @ stepper.x_aug
+        eps = self.eps
+        if (v >= st.lo_adj - eps).all() and (v <= st.hi_adj + eps).all():
+            return 0, True
+        stepper.set_point(x)
+        red = stepper.reduced(st.Ain)
+        v = red[:, -1]
+        warm = st.warm.get("min_norm")
+        v0 = z0 = None
+        if warm is not None and self._qp_class is ProxQP:
+            v0 = Z.T @ (warm[0] - x)
+            z0 = warm[1]
+        nf = stepper.nf
+        y, z, its, ok = self._run_qp(
+            st, "min_norm", np.eye(nf), c, red[:, :nf].copy(), st.lo_adj - v, st.hi_adj - v, v0, z0
+        )
+        if not ok:  # keep the optimal (not minimum-norm) point
+            st.warm.pop("min_norm", None)
+            return its, False
+        xk = x + Z @ y
+        st.warm["min_norm"] = (xk, np.array(z))
+        stepper.set_point(xk)
+        return its, ok
+
+    # -------------------------------------------------------------------- result
+    def _result(
+        self, st, parsed, x_aug, ranks, method, qp_levels, iterations, converged
+    ) -> HierarchyResult:
+        if len(st.nonempty):
+            with np.errstate(invalid="ignore", over="ignore"):  # non-finite: raised below
+                v = st.A @ x_aug  # A x - ref, row by row
+            if not st.all_eq:
+                viol = np.maximum(st.rlo - v, 0.0)
+                viol += np.maximum(v - st.rup, 0.0)
+                v = viol
+            v *= v
+            if len(st.nonempty) == len(st.sizes):
+                res = np.sqrt(np.add.reduceat(v, st.nonempty_starts))
+            else:
+                res = np.zeros(len(st.sizes))
+                res[st.nonempty] = np.sqrt(np.add.reduceat(v, st.nonempty_starts))
+        else:
+            res = np.zeros(len(st.sizes))
+        x = x_aug[: self.n].copy()
+        out = HierarchyResult(
+            x, res, ranks, method, qp_levels, iterations, converged, self._fro, self.eps
+        )
+        if not math.isfinite(out.xnorm + float(res.sum())):
+            _raise_nonfinite_matrix(parsed)
+            _raise_bad_bounds(parsed)
+            raise SolverError(
+                "solve_hierarchy: the solution is not finite (overflow: is the stack scaled?)"
+            )
+        return out
+
+
+def solve_hierarchy(
+    levels,
+    damping: float = 0.0,
+    *,
+    rank_tol: float = 1e-9,
+    eps: float = 1e-9,
+    backend: str = "auto",
+    shortcut: bool = True,
+) -> HierarchyResult:
+    """Solve a stack of levels once (a thin wrapper over a fresh :class:`HierarchySolver`).
+
+    ``levels``: list of ``(A, lower, upper)`` or ``(A, b)``, highest priority first.
+    Returns a :class:`HierarchyResult`; the solution is ``result.x``.
+    """
+    solver = HierarchySolver(
+        damping=damping, rank_tol=rank_tol, eps=eps, backend=backend, shortcut=shortcut
+    )
+    return solver.solve(levels)
+
+
+# ------------------------------------------------------------------- helpers
+def _plan_blocks(sizes, ranks) -> list[tuple[int, int]]:
+    """Runs of consecutive non-empty levels of full row rank become one block."""
+    blocks: list[tuple[int, int]] = []
+    run = -1
+    for k, m in enumerate(sizes):
+        if m == 0:
+            if run >= 0:
+                blocks.append((run, k))
+                run = -1
+            continue
+        if ranks[k] == m:
+            if run < 0:
+                run = k
+            continue
+        if run >= 0:
+            blocks.append((run, k))
+            run = -1
+        blocks.append((k, k + 1))
+    if run >= 0:
+        blocks.append((run, len(sizes)))
+    return blocks
+
+
+def _widen(st: _Structure, i1: int, v: np.ndarray) -> None:
+    """Widen the frozen intervals of the first ``i1`` inequality rows so that they
+    contain ``v`` (their values at the current point, which the QP satisfied only to its
+    tolerance): the next QP is then feasible at the current point."""
+    np.minimum(st.lo_adj[:i1], v, out=st.lo_adj[:i1])
+    np.maximum(st.hi_adj[:i1], v, out=st.hi_adj[:i1])
+
+
+def _save(stepper: NullspaceStepper):
+    """What :func:`_restore` needs to undo a step (``x``, ``Z``, counters)."""
+    z = None if stepper.identity else stepper.w[:, stepper.c0 : stepper.n].copy(order="F")
+    return (stepper.x.copy(), z, stepper.c0, stepper.nf, stepper.identity, stepper.moved)
+
+
+def _restore(stepper: NullspaceStepper, saved) -> None:
+    x, z, c0, nf, identity, moved = saved
+    stepper.c0, stepper.nf = c0, nf
+    if identity:
+        stepper.reset()
+    else:
+        stepper.w[:, c0 : stepper.n] = z
+        stepper.identity = False
+    stepper.x[:] = x
+    stepper.moved = moved
+
+
+def _check_damping(damping: float) -> None:
+    if not (math.isfinite(damping) and damping >= 0.0):
+        raise SolverError(f"solve_hierarchy: damping must be finite and >= 0, got {damping}")
+
+
+def _as_matrix(A, k: int) -> np.ndarray:
+    try:
+        A = np.asarray(A, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SolverError(f"level {k}: A is not a numeric matrix ({exc})") from None
+    if A.ndim != 2:
+        raise SolverError(f"level {k}: A must be 2-D, got shape {A.shape}")
+    return A
+
+
+def _as_vector(v, k: int, name: str, m: int) -> np.ndarray:
+    try:
+        v = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SolverError(f"level {k}: {name} is not a numeric vector ({exc})") from None
+    if v.shape != (m,):
+        if v.ndim == 2 and v.shape in ((m, 1), (1, m)):
+            return v.reshape(m)
+        raise SolverError(
+            f"level {k}: {name} has shape {v.shape}, expected ({m},) (A has {m} rows)"
+        )
+    return v
+
+
+def _raise_nonfinite_matrix(parsed) -> None:
+    """Raise naming the first non-finite entry of a level's matrix or equality target."""
+    for k, (A, lo, up) in enumerate(parsed):
+        bad = np.argwhere(~np.isfinite(A))
+        if len(bad):
+            i, j = bad[0]
+            raise SolverError(
+                f"level {k}, row {i}: A[{i}, {j}] = {A[i, j]} is not finite"
+                f" ({len(bad)} non-finite entries in this level)"
+            )
+        if up is None:
+            bad = np.flatnonzero(~np.isfinite(lo))
+            if len(bad):
+                i = bad[0]
+                raise SolverError(f"level {k}, row {i}: target b = {lo[i]} is not finite")
+
+
+def _raise_bad_bounds(parsed) -> None:
+    """Raise naming the first NaN bound, ``lower > upper`` or infinite equality."""
+    for k, (_, lo, up) in enumerate(parsed):
+        if up is None:
+            up = lo
+        for name, v in (("lower", lo), ("upper", up)):
+            bad = np.flatnonzero(np.isnan(v))
+            if len(bad):
+                raise SolverError(f"level {k}, row {bad[0]}: {name} is NaN")
+        bad = np.flatnonzero(lo > up)
+        if len(bad):
+            i = bad[0]
+            raise SolverError(
+                f"level {k}, row {i}: lower ({lo[i]}) > upper ({up[i]}); expected lower <= upper"
+            )
+        bad = np.flatnonzero((lo == up) & ~np.isfinite(lo))
+        if len(bad):
+            i = bad[0]
+            raise SolverError(
+                f"level {k}, row {i}: equality target {lo[i]} is not finite"
+                " (lower == upper == +-inf)"
+            )

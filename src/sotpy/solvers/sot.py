@@ -1,0 +1,280 @@
+r"""The ``SOT`` entity: a stack of tasks solved with strict priorities.
+
+::
+
+    sot = SOT("sot", robot.dynamic)          # nv from the dynamic's model
+    plug(robot.device.state, sot.position)   # done by the constructor when it can
+    sot.dt.value = 0.001                     # control period (s), for the joint limits
+    sot.push(taskFeet)                       # highest priority first
+    sot.push(taskRightWrist)
+    plug(sot.control, robot.device.control)  # the device in velocity mode
+
+Each tick ``control`` is the joint velocity :math:`\dot q` (size ``nv``: a free flyer's
+twist in its own frame, then the joints) that solves, lexicographically (see
+:mod:`sotpy.solvers.hierarchy` for the exact definition, damping and rank tolerance):
+
+0. the joint limits, a hard level (on by default, ``setJointLimits(False)`` to remove
+   it): for every one-dimensional joint with finite limits,
+   :math:`\max(-\bar v, (q_{min} - q)/dt) \le \dot q_j \le \min(\bar v, (q_{max} - q)/dt)`,
+   so that one period of integration cannot leave the limits, with :math:`\bar v` the
+   velocity limit (``upperVl``);
+1. then every pushed task in order: ``J qdot = task`` for an equality task
+   (``task = -gain * error``), ``lower <= J qdot <= upper`` for an inequality task.
+
+The ``damping`` input (default 0) is the solver's damping :math:`\lambda` inside each
+level. Stack edits (``push``, ``remove``, ``up``, ``down``, ``clear``) change the
+dependencies of ``control``: they take effect at its next evaluation (the next tick of
+a running loop), and a refused edit leaves the stack as it was.
+
+After each evaluation, ``lastResult`` holds the solver's
+:class:`~sotpy.solvers.hierarchy.HierarchyResult` (residual and rank of every level,
+the joint-limit level first when enabled). A hard level that cannot be satisfied still
+gives the least-violating control, and the SOT says so with a ``SotpyWarning`` (once
+until it is satisfied again) and ``lastResult.feasible``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+
+from ..errors import EntityError, SignalTypeError, SotpyError, SotpyWarning
+from ..graph import DOUBLE, VECTOR, Entity, Input, Output, command, plug
+from ..graph.pool import pool
+from ..tasks.task import TaskAbstract
+from .hierarchy import HierarchySolver
+
+__all__ = ["SOT"]
+
+_NO_LIMIT = 1e30  # a limit at least this large is no limit
+
+
+class SOT(Entity):
+    """Stack of tasks with strict priorities; ``control`` is the joint velocity."""
+
+    damping = Input(DOUBLE, default=0.0, doc="damping inside each level (0: exact)")
+    position = Input(VECTOR, doc="q, for the joint-limit level (plug the device state)")
+    lowerJl = Input(VECTOR, doc="lower position limits (nq), from Dynamic")
+    upperJl = Input(VECTOR, doc="upper position limits (nq), from Dynamic")
+    upperVl = Input(VECTOR, doc="velocity limits (nv), from Dynamic")
+    dt = Input(DOUBLE, doc="control period (s), for the joint-limit level")
+
+    @Output(VECTOR, timeDependent=False, doc="joint velocity qdot (nv)")
+    def control(self, *values: Any) -> np.ndarray:
+        """Solve the stack (see the module doc)."""
+        return self._solve(values)
+
+    def __init__(self, name: str, dynamic: Entity) -> None:
+        model = getattr(dynamic, "model", None)
+        if model is None or not hasattr(model, "nv"):
+            raise EntityError(
+                f"SOT({name}): expected a Dynamic entity (with a Pinocchio model), got {dynamic!r}"
+            )
+        self.nv = int(model.nv)
+        self._stack: list[TaskAbstract] = []
+        self._jointLimits = True
+        self._solver = HierarchySolver()
+        self.lastResult: Any = None
+        self._warned = False
+        # one-dimensional joints: their index in q and in v
+        iq, iv = [], []
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            if joint.nq == 1 and joint.nv == 1:
+                iq.append(joint.idx_q)
+                iv.append(joint.idx_v)
+        self._iq = np.array(iq, dtype=int)
+        self._iv = np.array(iv, dtype=int)
+        for sig in ("lowerJl", "upperJl", "upperVl"):
+            plug(dynamic.signal(sig), self.signal(sig))
+        source = dynamic.signal("position").source
+        if source is not None:
+            plug(source, self.position)
+        self._rewire()
+
+    # -- the stack --------------------------------------------------------------------
+    def _task(self, task: TaskAbstract | str, cmd: str) -> TaskAbstract:
+        if isinstance(task, str):
+            if not pool.hasEntity(task):
+                raise SotpyError(
+                    f"SOT({self.name}).{cmd}: no entity named {task!r} in the pool; "
+                    f"the stack is unchanged"
+                )
+            task = pool.getEntity(task)  # type: ignore[assignment]
+        if not isinstance(task, TaskAbstract):
+            raise SotpyError(
+                f"SOT({self.name}).{cmd}: {task!r} is not a task (Task or TaskInequality); "
+                "the stack is unchanged"
+            )
+        return task
+
+    def _index(self, task: TaskAbstract, cmd: str) -> int:
+        for i, t in enumerate(self._stack):
+            if t is task:
+                return i
+        raise SotpyError(
+            f"SOT({self.name}).{cmd}: {task.name} is not in the stack "
+            f"({', '.join(self.list()) or 'empty'})"
+        )
+
+    @command
+    def push(self, task: Any) -> None:
+        """Add ``task`` (an entity or its name) at the lowest priority."""
+        task = self._task(task, "push")
+        if any(t is task for t in self._stack):
+            raise SotpyError(f"SOT({self.name}).push: {task.name} is already in the stack")
+        self._checkWidth(task, "push")
+        self._edit([*self._stack, task])
+
+    @command
+    def remove(self, task: Any) -> None:
+        """Remove ``task`` from the stack."""
+        task = self._task(task, "remove")
+        i = self._index(task, "remove")
+        self._edit(self._stack[:i] + self._stack[i + 1 :])
+
+    @command
+    def up(self, task: Any) -> None:
+        """Move ``task`` one level up (higher priority)."""
+        task = self._task(task, "up")
+        i = self._index(task, "up")
+        if i > 0:
+            s = list(self._stack)
+            s[i - 1], s[i] = s[i], s[i - 1]
+            self._edit(s)
+
+    @command
+    def down(self, task: Any) -> None:
+        """Move ``task`` one level down (lower priority)."""
+        task = self._task(task, "down")
+        i = self._index(task, "down")
+        if i < len(self._stack) - 1:
+            s = list(self._stack)
+            s[i + 1], s[i] = s[i], s[i + 1]
+            self._edit(s)
+
+    @command
+    def clear(self) -> None:
+        """Remove every task."""
+        self._edit([])
+
+    @command
+    def list(self) -> list[str]:
+        """Names of the tasks, highest priority first."""
+        return [t.name for t in self._stack]
+
+    @command
+    def display(self) -> None:
+        """Print the stack, highest priority first."""
+        print(f"+-----------------\n+   SOT {self.name}\n+-----------------")
+        if self._jointLimits:
+            print("| 0. joint limits (hard)")
+        for i, t in enumerate(self._stack, start=1):
+            kind = "inequality" if t.isInequality else "equality"
+            print(f"| {i}. {t.name} ({t.className}, {kind})")
+        print("+-----------------")
+
+    @command
+    def setJointLimits(self, enabled: bool) -> None:
+        """Keep (default) or drop the joint-limit level."""
+        self._jointLimits = enabled
+        self._rewire()
+
+    @command
+    def getSize(self) -> int:
+        """nv, the size of ``control``."""
+        return self.nv
+
+    def _edit(self, stack: list[TaskAbstract]) -> None:
+        old = self._stack
+        self._stack = stack
+        try:
+            self._rewire()
+        except BaseException:
+            self._stack = old
+            self._rewire()
+            raise
+
+    def _rewire(self) -> None:
+        deps: list[Any] = [self.damping]
+        if self._jointLimits:
+            deps += [self.position, self.lowerJl, self.upperJl, self.upperVl, self.dt]
+        for t in self._stack:
+            deps.append(t.jacobian)
+            deps += [t.lower, t.upper] if t.isInequality else [t.task]
+        self.control.setDependencies(deps)
+
+    def _checkWidth(self, task: TaskAbstract, cmd: str) -> None:
+        """Refuse a task whose Jacobian is readable now and has the wrong width."""
+        try:
+            J = task.jacobian.value
+        except SotpyError:
+            return  # not computable yet (unplugged inputs): checked at each solve
+        if np.ndim(J) != 2 or np.shape(J)[1] != self.nv:
+            raise SignalTypeError(
+                f"SOT({self.name}).{cmd}: {task.jacobian.name} has shape {np.shape(J)}, "
+                f"expected (m, {self.nv}) (nv of the robot); the stack is unchanged"
+            )
+
+    def graphClusters(self) -> list[tuple[str, list[Entity]]]:
+        return [(f"SOT {self.name}", list(self._stack))]
+
+    # -- solve ------------------------------------------------------------------------
+    def _solve(self, values: tuple[Any, ...]) -> np.ndarray:
+        nv = self.nv
+        it = iter(values)
+        damping = float(next(it))
+        levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        if self._jointLimits:
+            levels.append(self._limitLevel(next(it), next(it), next(it), next(it), next(it)))
+        for task in self._stack:
+            J = next(it)
+            if np.ndim(J) != 2 or J.shape[1] != nv:
+                raise SignalTypeError(
+                    f"SOT({self.name}): {task.jacobian.name} has shape {np.shape(J)}, "
+                    f"expected (m, {nv})"
+                )
+            if task.isInequality:
+                lower, upper = next(it), next(it)
+            else:
+                lower = upper = next(it)
+            levels.append((J, lower, upper))
+        if not levels:
+            return np.zeros(nv)
+        result = self._solver.solve(levels, damping=damping)
+        self.lastResult = result
+        if not result.feasible:
+            if not self._warned:
+                self._warned = True
+                first = "the joint limits" if self._jointLimits else self._stack[0].name
+                warnings.warn(
+                    f"SOT({self.name}): the hard level ({first}) cannot be satisfied "
+                    f"(violation {result.residuals[0]:.3g}); the control is the least "
+                    "violating one (see sot.lastResult)",
+                    SotpyWarning,
+                    stacklevel=2,
+                )
+        else:
+            self._warned = False
+        return result.x
+
+    def _limitLevel(
+        self, q: Any, lower: Any, upper: Any, vmax: Any, dt: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if not dt > 0:
+            raise SignalTypeError(f"{self.dt.name}: the control period must be > 0 s, got {dt}")
+        q = np.asarray(q)
+        ql, qu, vm = np.asarray(lower)[self._iq], np.asarray(upper)[self._iq], np.asarray(vmax)
+        vm = vm[self._iv]
+        # Pinocchio writes ~1.8e308 where a model gives no limit: no bound there
+        vm = np.where(vm < _NO_LIMIT, vm, np.inf)
+        lo = np.where(ql > -_NO_LIMIT, (ql - q[self._iq]) / dt, -np.inf)
+        hi = np.where(qu < _NO_LIMIT, (qu - q[self._iq]) / dt, np.inf)
+        lo = np.clip(lo, -vm, vm)
+        hi = np.clip(hi, -vm, vm)
+        rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
+        A = np.zeros((len(rows), self.nv))
+        A[np.arange(len(rows)), self._iv[rows]] = 1.0
+        return A, lo[rows], hi[rows]
