@@ -8,10 +8,18 @@ import pinocchio as pin
 import pytest
 
 from sotpy.dynamics import load_robot
-from sotpy.errors import EntityError, SignalTypeError, SotpyError
+from sotpy.errors import EntityError, SignalTypeError, SotpyError, SotpyWarning
 from sotpy.graph import MATRIX, VECTOR, Entity, Input, Output, graphDot, plug
+from sotpy.solvers import solve_hierarchy
 from sotpy.solvers.sot import SOT
-from sotpy.tasks import FeatureGeneric, MetaTaskKine6d, Task
+from sotpy.tasks import (
+    FeatureGeneric,
+    MetaTaskKine6d,
+    MetaTaskKineCom,
+    MetaTaskKinePosture,
+    Task,
+    TaskInequality,
+)
 
 
 @pytest.fixture
@@ -192,3 +200,133 @@ def test_talos_reaches_with_the_right_wrist_keeping_its_feet(talos):
             assert model.lowerPositionLimit[jt.idx_q] - 1e-9 <= q[jt.idx_q]
             assert q[jt.idx_q] <= model.upperPositionLimit[jt.idx_q] + 1e-9
     assert sot.lastResult.feasible
+
+
+def _stretched_arm(talos, elbow: float, name: str):
+    """Talos with the right elbow at ``elbow`` rad (0: straight, on its limit) and a
+    right-wrist task asking for a point 1 m further along the forearm."""
+    model, dyn, dev = talos.model, talos.dynamic, talos.device
+    q = talos.halfSitting.copy()
+    j = model.getJointId("arm_right_4_joint")
+    q[model.joints[j].idx_q] = elbow
+    dev.set(q)
+    rh = MetaTaskKine6d(name, dyn, "right-wrist")
+    M = dyn.signal("right-wrist").value
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    shoulder = data.oMi[model.getJointId("arm_right_3_joint")].translation
+    forearm = M.translation - shoulder
+    forearm /= np.linalg.norm(forearm)
+    rh.gotoNd(M.translation + 1.0 * forearm, "111000", gain=1.0)
+    # only the right arm's joints (no free flyer, no torso): the arm alone must reach
+    arm = np.zeros(model.nv, dtype=bool)
+    for k in range(1, 8):
+        arm[model.joints[model.getJointId(f"arm_right_{k}_joint")].idx_v] = True
+    rh.task.controlSelec.value = arm
+    return rh
+
+
+def test_stretched_arm_gives_a_bounded_control(talos):
+    """A stretched arm (elbow straight, on its limit) asked to reach 1 m further, with
+    the arm's joints only: the Jacobian is nearly singular and undamped least squares
+    explodes; damping bounds the control by ||task|| / (2 lambda), and the joint-limit
+    level bounds each joint by its velocity limit."""
+    sot = SOT("sot", talos.dynamic)
+    sot.setJointLimits(False)
+    rh = _stretched_arm(talos, 0.0, "rh")
+    sot.push(rh.task)
+    J = rh.task.jacobian.value
+    sigma = np.linalg.svd(J, compute_uv=False)
+    assert sigma[-1] < 0.05 * sigma[0]  # nearly singular indeed (condition > 20)
+    undamped = sot.control.value
+    assert np.linalg.norm(undamped) > 30.0  # the explosion the next two cases prevent
+    lam = 0.05
+    sot.damping.value = lam
+    damped = sot.control.value
+    task = rh.task.task.value
+    assert np.linalg.norm(damped) <= np.linalg.norm(task) / (2 * lam) + 1e-9
+    # the damped step is the damped least-squares formula J^T (J J^T + lam^2 I)^-1 b
+    expected = J.T @ np.linalg.solve(J @ J.T + lam**2 * np.eye(len(task)), task)
+    np.testing.assert_allclose(damped, expected, atol=1e-9)
+    sot.damping.value = 0.0
+    sot.setJointLimits(True)
+    sot.dt.value = 0.005
+    limited = sot.control.value
+    vmax = talos.model.velocityLimit
+    iv = sot._iv
+    assert (np.abs(limited[iv]) <= vmax[iv] + 1e-9).all()
+    assert np.isfinite(limited).all() and np.linalg.norm(limited) < np.linalg.norm(undamped)
+
+
+def test_infeasible_hard_level_warns_and_returns_the_least_violating_control(talos):
+    nv = talos.model.nv
+    sot = SOT("sot", talos.dynamic)
+    sot.setJointLimits(False)
+    f = FeatureGeneric("f_conflict")
+    J = np.zeros((2, nv))
+    J[:, 10] = 1.0
+    f.jacobianIN.value = J
+    f.errorIN.value = np.zeros(2)
+    hard = TaskInequality("hard")
+    hard.add(f)
+    hard.dt.value = 0.01
+    # qdot_10 >= 1 (row 0) and qdot_10 <= -1 (row 1): infeasible; best qdot_10 = 0
+    hard.referenceInf.value = np.array([0.01, -np.inf])
+    hard.referenceSup.value = np.array([np.inf, -0.01])
+    sot.push(hard)
+    sot.push(generic_task("below", np.eye(nv)[[11]], np.array([-2.0])))
+    with pytest.warns(SotpyWarning, match="hard level .*hard.* cannot be satisfied"):
+        qdot = sot.control.value
+    assert not sot.lastResult.feasible
+    assert sot.lastResult.residuals[0] == pytest.approx(np.sqrt(2.0), abs=1e-6)
+    assert qdot[10] == pytest.approx(0.0, abs=1e-6)
+    assert qdot[11] == pytest.approx(2.0, abs=1e-6)  # the level below still met
+
+
+def test_active_joint_limits_solved_without_qp_on_talos(talos):
+    """Stand and reach on Talos: the grippers sit on their upper limit (0) and the CoM
+    level moves them, so the joint-limit level is active; the SOT solves it by the box
+    active-set path, and the control equals the QP cascade's."""
+    dyn, dev = talos.dynamic, talos.device
+    sot = SOT("sot", dyn)
+    sot.dt.value = 0.005
+    for op in ("left-ankle", "right-ankle"):
+        m = MetaTaskKine6d(op.replace("-", "_"), dyn, op)
+        m.keep()
+        sot.push(m.task)
+    com = MetaTaskKineCom(dyn)
+    com.keep()
+    com.feature.selec.value = "11"
+    sot.push(com.task)
+    rh = MetaTaskKine6d("rh", dyn, "right-wrist")
+    rh.gotoNd(
+        dyn.signal("right-wrist").value.translation + np.array([0.2, 0.0, 0.1]), "111000", 1.0
+    )
+    sot.push(rh.task)
+    posture = MetaTaskKinePosture(dyn, dev)
+    posture.gotoq(talos.halfSitting, 0.5)
+    sot.push(posture.task)
+    plug(sot.control, dev.control)
+    captured = {}
+    solve = sot._solver.solve
+
+    def spy(levels, damping=None):
+        captured["levels"] = [tuple(np.array(a) for a in lv) for lv in levels]
+        return solve(levels, damping)
+
+    sot._solver.solve = spy
+    methods = []
+    for _ in range(40):
+        dev.increment(0.005)
+        methods.append(sot.lastResult.method)
+    assert methods[-10:] == ["active-set"] * 10
+    levels = captured["levels"]
+    reference = solve_hierarchy(levels, shortcut=False)  # QP at every level
+    assert reference.method == "cascade"
+    res = sot.lastResult
+    np.testing.assert_allclose(res.residuals, reference.residuals, atol=1e-7)
+    np.testing.assert_allclose(res.x, reference.x, atol=1e-6)
+    A0, lo, up = levels[0]
+    v = A0 @ res.x
+    assert ((v >= lo - 1e-9) & (v <= up + 1e-9)).all()
+    assert (np.abs(v - up) < 1e-12).any()  # a bound is indeed active

@@ -58,6 +58,7 @@ class NullspaceStepper:
         "_vec",
         "c0",
         "identity",
+        "last_qr",
         "m_max",
         "moved",
         "n",
@@ -87,6 +88,7 @@ class NullspaceStepper:
         self.nf = n
         self.identity = True
         self.moved = False
+        self.last_qr: tuple[np.ndarray, np.ndarray] | None = None
 
     def reset(self) -> None:
         """Back to ``x = 0``, ``Z = I``."""
@@ -98,6 +100,26 @@ class NullspaceStepper:
         self.nf = self.n
         self.identity = True
         self.moved = False
+
+    def fix(self, idx: np.ndarray, values: np.ndarray) -> None:
+        """Start from ``x_idx = values``, ``x = 0`` elsewhere, with ``Z`` the unit
+        vectors of the other variables (the variables ``idx`` are held fixed)."""
+        if len(idx) == 0:
+            self.reset()
+            return
+        n, k = self.n, len(idx)
+        w = self.w
+        w[:, :n] = 0.0
+        free = np.ones(n, dtype=bool)
+        free[idx] = False
+        w[np.flatnonzero(free), np.arange(k, n)] = 1.0
+        w[:n, n] = 0.0
+        w[idx, n] = values
+        w[n, n] = 1.0
+        self.c0 = k
+        self.nf = n - k
+        self.identity = False
+        self.moved = True
 
     def basis(self) -> np.ndarray:
         """The current basis ``Z`` (``n x nf`` view, orthonormal columns)."""
@@ -151,6 +173,7 @@ class NullspaceStepper:
             if r >= 0:
                 return r
         qr, jpvt, tau, _, _info = _dgeqp3(maug[:, :nf].T, self._lwork, scratch)
+        self.last_qr = (qr, jpvt)
         kmax = m if m < nf else nf
         if abs(qr[kmax - 1, kmax - 1]) > thr:
             r = kmax

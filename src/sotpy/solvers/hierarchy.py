@@ -53,6 +53,11 @@ Solution paths
   (``dgeqp3``, ``dormqr``, ``dtrtrs``/``dgels``) and preallocated buffers; undamped
   runs of levels found of full row rank at the previous call are factored as one block
   (split again if one of them lost rank);
+* a first level that is a box (each row bounds one variable: the SOT's joint limits),
+  undamped: the *active-set path* (:mod:`._boxset`): the variables guessed at a bound
+  (the previous call's) are fixed, the equality rows below solved by the null-space
+  recursion, and the guess verified (primal feasibility, lexicographic multipliers),
+  corrected a few times if needed; no QP;
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
@@ -76,6 +81,7 @@ import numpy as np
 
 from sotpy.errors import SolverError
 
+from ._boxset import BoxActiveSet, DualCheck
 from ._cascade import DaqpQP, ProxQP, daqp_available
 from ._equality import NullspaceStepper
 
@@ -88,6 +94,8 @@ __all__ = [
 
 _F64 = np.dtype(np.float64)
 _BACKENDS = ("auto", "proxsuite", "daqp")
+#: primal-dual corrections of the box path's active set before falling back to QPs
+_BOX_ITERATIONS = 4
 
 
 class HierarchyResult:
@@ -173,6 +181,8 @@ class _Structure:
         "active",
         "all_eq",
         "blocks",
+        "box",
+        "box_blocks",
         "bufs",
         "d",
         "din",
@@ -429,6 +439,8 @@ class HierarchySolver:
         st.bufs = {}
         st.active = set()
         st.shortcut_ok = True
+        st.box = None
+        st.box_blocks = None
         mtot = st.A.shape[0]
         eqm = np.ones(mtot, dtype=bool) if key is None else np.frombuffer(key, dtype=bool)
         st.all_eq = bool(eqm.all())
@@ -505,9 +517,19 @@ class HierarchySolver:
         lo_adj, hi_adj = st.lo_adj, st.hi_adj
         np.copyto(lo_adj, st.loin)
         np.copyto(hi_adj, st.upin)
+        box = None
+        if self.shortcut and lam == 0.0:
+            # undamped only: damped, each level's point depends on the path (x_{k-1}),
+            # and a bound may be active at one level and not at another
+            box = self._box(st)
+            if box is not None:
+                result = self._solve_box(st, parsed, stepper, lam, box)
+                if result is not None:
+                    return result
+                stepper.reset()
         ranks = np.zeros(len(st.sizes), dtype=np.intp)
         x_aug = stepper.x_aug
-        if self.shortcut and st.shortcut_ok:
+        if self.shortcut and st.shortcut_ok and box is None:
             # the whole stack's equality rows; if the point satisfies every inequality
             # row it is the answer (tried first when it was so at the previous call)
             last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
@@ -549,9 +571,111 @@ class HierarchySolver:
             converged = converged and ok
         method = "cascade" if qp_levels else "shortcut"
         st.shortcut_ok = not qp_levels
+        if box is not None:
+            box.remember(stepper.x, self.eps)
         return self._result(
             st, parsed, x_aug, ranks, method, tuple(qp_levels), iterations, converged
         )
+
+    # ------------------------------------------------------------------ box path
+    def _box(self, st: _Structure) -> BoxActiveSet | None:
+        """The box of level 0 if level 0 is one (see :mod:`._boxset`), else None."""
+        if st.sizes[0] == 0:
+            return None
+        box = st.box
+        if box is None:
+            box = st.box = BoxActiveSet(self.n)
+        s1 = st.starts[1]
+        if not box.set_box(st.A[:s1, : self.n], st.lo[:s1], st.up[:s1]):
+            return None
+        return box
+
+    def _solve_box(
+        self, st: _Structure, parsed, stepper: NullspaceStepper, lam: float, box: BoxActiveSet
+    ) -> HierarchyResult | None:
+        """Fix the guessed active bounds, solve the equality rows below, verify (primal
+        and lexicographic dual); a few corrections; None if still not verified."""
+        eps = self.eps
+        n = self.n
+        i_lower = st.eq_bounds[0][3]  # inequality rows of the levels below level 0
+        for _ in range(_BOX_ITERATIONS):
+            W, values, s = box.fixed()
+            stepper.fix(W, values)
+            dual = DualCheck(n, W, s) if len(W) else None
+            ranks = self._box_steps(st, stepper, lam, dual)
+            x = stepper.x
+            low = x < box.lo - eps
+            high = x > box.hi + eps
+            if low.any() or high.any():
+                box.at_lo |= low
+                box.at_hi |= high
+                continue
+            if dual is not None:
+                dual.finish(x)
+                if dual.failed:
+                    j = W[dual.worst]
+                    box.at_lo[j] = box.at_hi[j] = False
+                    continue
+            if i_lower < len(st.in_idx):
+                v = st.Ain[i_lower:] @ stepper.x_aug
+                if not (
+                    (v >= st.lo_adj[i_lower:] - eps).all()
+                    and (v <= st.hi_adj[i_lower:] + eps).all()
+                ):
+                    return None
+            method = "active-set" if len(W) else "shortcut"
+            return self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
+        return None
+
+    def _box_steps(
+        self, st: _Structure, stepper: NullspaceStepper, lam: float, dual: DualCheck | None
+    ) -> np.ndarray:
+        """The equality rows of levels 1.. (the fixed variables held), levels found of
+        full row rank at the previous call factored together when undamped; the dual
+        check run on each block."""
+        eb = st.eq_bounds
+        ranks = np.zeros(len(st.sizes), dtype=np.intp)
+        levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
+        if not levels:
+            if dual is not None:
+                dual.finish(stepper.x)
+            return ranks
+        blocks = st.box_blocks
+        if blocks is None or lam != 0.0:
+            blocks = [[k] for k in levels]
+        last = levels[-1]
+        Aeq, fro, tol, n = st.Aeq, self._fro, self.rank_tol, self.n
+        step = stepper.step
+
+        def one(ks: list[int], merged: bool) -> int:
+            rows = Aeq[eb[ks[0]][0] : eb[ks[-1]][1]]
+            c0 = stepper.c0
+            judge = dual is not None and dual.pending
+            xprev = stepper.x.copy() if judge and lam > 0.0 else None
+            if merged:
+                r = step(rows, min(fro[k] for k in ks), tol, 0.0, ks[-1] != last, True)
+                if r < 0:
+                    return r
+            else:
+                r = step(rows, fro[ks[0]], tol, lam, ks[-1] != last)
+            if judge:
+                damp = None if xprev is None else (lam * lam) * (stepper.x - xprev)
+                # Y = the first r columns of the basis when the step formed it
+                rank = r if ks[-1] != last else -1
+                dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr, damp)
+            return r
+
+        for ks in blocks:
+            if len(ks) > 1 and one(ks, True) >= 0:
+                for k in ks:
+                    ranks[k] = eb[k][1] - eb[k][0]
+                continue
+            for k in ks:
+                ranks[k] = one([k], False)
+        if lam == 0.0:
+            full = [ranks[k] == eb[k][1] - eb[k][0] for k in levels]
+            st.box_blocks = _merge_runs(levels, full)
+        return ranks
 
     def _qp_level(
         self, st: _Structure, stepper: NullspaceStepper, k: int, lam: float
@@ -775,6 +899,23 @@ def _plan_blocks(sizes, ranks) -> list[tuple[int, int]]:
         blocks.append((k, k + 1))
     if run >= 0:
         blocks.append((run, len(sizes)))
+    return blocks
+
+
+def _merge_runs(levels: list[int], full: list[bool]) -> list[list[int]]:
+    """Runs of consecutive full-rank levels as one block, the others alone."""
+    blocks: list[list[int]] = []
+    run: list[int] = []
+    for k, f in zip(levels, full, strict=True):
+        if f:
+            run.append(k)
+            continue
+        if run:
+            blocks.append(run)
+            run = []
+        blocks.append([k])
+    if run:
+        blocks.append(run)
     return blocks
 
 

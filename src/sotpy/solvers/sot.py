@@ -28,9 +28,13 @@ a running loop), and a refused edit leaves the stack as it was.
 
 After each evaluation, ``lastResult`` holds the solver's
 :class:`~sotpy.solvers.hierarchy.HierarchyResult` (residual and rank of every level,
-the joint-limit level first when enabled). A hard level that cannot be satisfied still
-gives the least-violating control, and the SOT says so with a ``SotpyWarning`` (once
-until it is satisfied again) and ``lastResult.feasible``.
+the joint-limit level first when enabled). The *hard* level is the joint-limit level, or
+without it a first task that is an inequality (a constraint); a first equality task is a
+goal, which may be out of reach without any warning. A hard level that cannot be
+satisfied still gives the least-violating control, and the SOT says so with a
+``SotpyWarning`` (once until it is satisfied again) and ``lastResult.feasible``. (The
+joint-limit level itself is always feasible: its bounds are clipped so that
+``lower <= upper``.)
 """
 
 from __future__ import annotations
@@ -245,7 +249,8 @@ class SOT(Entity):
             return np.zeros(nv)
         result = self._solver.solve(levels, damping=damping)
         self.lastResult = result
-        if not result.feasible:
+        hard = self._jointLimits or self._stack[0].isInequality
+        if hard and not result.feasible:
             if not self._warned:
                 self._warned = True
                 first = "the joint limits" if self._jointLimits else self._stack[0].name
