@@ -79,6 +79,7 @@ import math
 
 import numpy as np
 
+from sotpy._blas import limit_blas_threads
 from sotpy.errors import SolverError
 
 from ._boxset import BoxActiveSet, DualCheck
@@ -269,6 +270,7 @@ class HierarchySolver:
         self._stepper: NullspaceStepper | None = None
         self._structure: _Structure | None = None
         self._qp_class = DaqpQP if backend == "daqp" else ProxQP
+        limit_blas_threads()  # small matrices: BLAS threads only wait for a core
         # proxsuite stalls below about 1e-8 on the degenerate sets of frozen levels
         self._qp_eps = self.eps if backend == "daqp" else max(self.eps, 1e-8)
         self._fro = np.zeros(0)
