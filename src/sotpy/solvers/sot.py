@@ -82,6 +82,7 @@ class SOT(Entity):
         self._solver = HierarchySolver()
         self.lastResult: Any = None
         self._warned = False
+        self._limits: tuple[Any, ...] | None = None
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
         for j in range(1, model.njoints):
@@ -270,16 +271,30 @@ class SOT(Entity):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if not dt > 0:
             raise SignalTypeError(f"{self.dt.name}: the control period must be > 0 s, got {dt}")
-        q = np.asarray(q)
-        ql, qu, vm = np.asarray(lower)[self._iq], np.asarray(upper)[self._iq], np.asarray(vmax)
-        vm = vm[self._iv]
+        cache = self._limits
+        if cache is None or cache[0] is not lower or cache[1] is not upper or cache[2] is not vmax:
+            cache = self._limits = self._limitRows(lower, upper, vmax)
+        _, _, _, iq, ql, qu, vm, A = cache
+        qj = np.asarray(q)[iq]
+        lo = np.subtract(ql, qj)
+        lo /= dt
+        np.clip(lo, -vm, vm, out=lo)
+        hi = np.subtract(qu, qj)
+        hi /= dt
+        np.clip(hi, -vm, vm, out=hi)
+        return A, lo, hi
+
+    def _limitRows(self, lower: Any, upper: Any, vmax: Any) -> tuple[Any, ...]:
+        """What the joint-limit level needs from the limits (they change rarely): the
+        bounded joints, their limits (inf where none) and the level's matrix."""
+        ql, qu = np.asarray(lower)[self._iq], np.asarray(upper)[self._iq]
+        vm = np.asarray(vmax)[self._iv]
         # Pinocchio writes ~1.8e308 where a model gives no limit: no bound there
         vm = np.where(vm < _NO_LIMIT, vm, np.inf)
-        lo = np.where(ql > -_NO_LIMIT, (ql - q[self._iq]) / dt, -np.inf)
-        hi = np.where(qu < _NO_LIMIT, (qu - q[self._iq]) / dt, np.inf)
-        lo = np.clip(lo, -vm, vm)
-        hi = np.clip(hi, -vm, vm)
-        rows = np.flatnonzero(np.isfinite(lo) | np.isfinite(hi))
+        ql = np.where(ql > -_NO_LIMIT, ql, -np.inf)
+        qu = np.where(qu < _NO_LIMIT, qu, np.inf)
+        rows = np.flatnonzero(np.isfinite(ql) | np.isfinite(qu) | np.isfinite(vm))
         A = np.zeros((len(rows), self.nv))
         A[np.arange(len(rows)), self._iv[rows]] = 1.0
-        return A, lo[rows], hi[rows]
+        A.flags.writeable = False
+        return (lower, upper, vmax, self._iq[rows], ql[rows], qu[rows], vm[rows], A)
