@@ -230,6 +230,8 @@ class HierarchySolver:
             back to the proxsuite cascade).
         shortcut: try the equality step first at every level with inequalities
             (``False``: a QP at every such level; for testing).
+        active_set: use the active-set path when the first level is a box (undamped;
+            ``False``: the QP cascade instead; for comparisons).
         check: validate the input up front (sizes are always checked; this adds
             non-finite matrices and ``lower <= upper``). Non-finite values that reach
             the solution are reported either way.
@@ -247,6 +249,7 @@ class HierarchySolver:
         shortcut: bool = True,
         check: bool = True,
         max_iter: int = 1000,
+        active_set: bool = True,
     ):
         if backend not in _BACKENDS:
             raise SolverError(f"HierarchySolver: backend {backend!r} is not one of {_BACKENDS}")
@@ -265,6 +268,7 @@ class HierarchySolver:
         self.eps = float(eps)
         self.backend = backend
         self.shortcut = bool(shortcut)
+        self.active_set = bool(active_set)
         self.check = bool(check)
         self.max_iter = int(max_iter)
         self._stepper: NullspaceStepper | None = None
@@ -520,7 +524,7 @@ class HierarchySolver:
         np.copyto(lo_adj, st.loin)
         np.copyto(hi_adj, st.upin)
         box = None
-        if self.shortcut and lam == 0.0:
+        if self.shortcut and self.active_set and lam == 0.0:
             # undamped only: damped, each level's point depends on the path (x_{k-1}),
             # and a bound may be active at one level and not at another
             box = self._box(st)
