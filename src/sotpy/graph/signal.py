@@ -474,6 +474,12 @@ class InputSignal(Signal):
             if isinstance(d, OutputSignal):
                 d._resolve()
         pool.version += 1
+        self.modeChanged()
+
+    def modeChanged(self) -> None:
+        """Called after the input is plugged, unplugged or gets its first constant (its
+        source changed). Does nothing; a subclass overrides it to react, e.g. an entity
+        whose output reads one input or another depending on which is set."""
 
     def _modeLabel(self) -> str:
         return "Ref" if self._mode == PLUGGED else "Cst"
