@@ -3,6 +3,9 @@
 ::
 
     sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S]
+    sotpy demo robot [--robot NAME] [--duration S] [--viewer] [--dt S]
+    sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
+                               [--target-offset X Y Z] [--margin M] [--damping L]
     sotpy robots
 
 Each sub-command is a function ``add_<name>(subparsers)`` that adds its parser and sets
@@ -12,11 +15,20 @@ sub-command by writing one and listing it in :data:`SUBCOMMANDS`. Demos are list
 """
 
 import argparse
+import functools
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .demos import finite_float, positive_float, robot_options, robot_run
+from .demos import (
+    REACH_ROBOTS,
+    finite_float,
+    positive_float,
+    reach_options,
+    reach_run,
+    robot_options,
+    robot_run,
+)
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
 
@@ -69,6 +81,13 @@ DEMOS: dict[
         robot_run,
     ),
 }
+for _robot in REACH_ROBOTS:
+    DEMOS[_robot] = (
+        f"the SoT slides' reaching demo on {_robot.capitalize()}: feet fixed, CoM over the "
+        "support polygon, right wrist to a target, half-sitting; --plot, --viewer",
+        functools.partial(reach_options, robot=_robot),
+        reach_run,
+    )
 
 
 def add_demo(subparsers: Any) -> None:

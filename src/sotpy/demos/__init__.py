@@ -5,6 +5,10 @@ command line and a script of ``examples/`` call.
   standing, :func:`~sotpy.demos.robot_tour.run_robot_tour`; ``sotpy demo robot``
   (options :func:`robot_options`, runner :func:`robot_run`, registered in
   ``sotpy.cli.DEMOS``).
+- :mod:`sotpy.demos.reach`: the SoT slides' reaching demo on a humanoid (feet fixed,
+  CoM over the support polygon, right wrist to a target, half-sitting, joint limits
+  hard), :func:`~sotpy.demos.reach.run_reach`; ``sotpy demo talos``, ``romeo``,
+  ``nao`` (options :func:`reach_options`, runner :func:`reach_run`).
 
 The pendulum tutorial (``sotpy demo pendulum``) lives in :mod:`sotpy.tutorial`.
 
@@ -21,15 +25,26 @@ import sys
 from typing import Any
 
 __all__ = [
+    "REACH_DEMO_DEFAULTS",
+    "REACH_ROBOTS",
     "ROBOT_DEMO_DEFAULTS",
     "finite_float",
     "positive_float",
+    "reach_options",
+    "reach_run",
     "robot_options",
     "robot_run",
 ]
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
 ROBOT_DEMO_DEFAULTS: dict[str, Any] = {"robot": "talos", "duration": 3.0, "dt": 1e-3}
+
+#: The robots of the reaching demo: ``sotpy demo <robot>``.
+REACH_ROBOTS: tuple[str, ...] = ("talos", "romeo", "nao")
+
+#: Defaults of ``sotpy demo talos|romeo|nao``: simulated time (s), time step (s), the
+#: margin of the CoM inside the support polygon (m).
+REACH_DEMO_DEFAULTS: dict[str, Any] = {"duration": 2.0, "dt": 1e-3, "margin": 0.01}
 
 
 def _number(text: str) -> float:
@@ -106,6 +121,102 @@ def robot_run(args: argparse.Namespace) -> int:
     verdict = "OK" if result["ok"] else "FAILED"
     print(
         f"robot tour {verdict}: {result['robot']}, {result['ticks']} ticks in "
+        f"{result['wall_time']:.2f} s"
+    )
+    return 0 if result["ok"] else 1
+
+
+def non_negative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    v = _number(text)
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return v
+
+
+def reach_options(parser: argparse.ArgumentParser, robot: str) -> None:
+    """Add the options of ``sotpy demo <robot>`` (the reaching demo): ``--duration S``,
+    ``--dt S``, ``--plot PATH``, ``--viewer``, ``--target-offset X Y Z``, ``--margin M``,
+    ``--damping L``;
+    ``robot`` is stored as the parsed ``robot``."""
+    d = REACH_DEMO_DEFAULTS
+    parser.set_defaults(robot=robot)
+    parser.add_argument(
+        "--duration",
+        type=positive_float,
+        default=d["duration"],
+        metavar="S",
+        help=f"simulated time, s (default {d['duration']:g})",
+    )
+    parser.add_argument(
+        "--dt",
+        type=positive_float,
+        default=d["dt"],
+        metavar="S",
+        help=f"control period and time step, s (default {d['dt']:g})",
+    )
+    parser.add_argument(
+        "--plot", metavar="PATH", help="save the task errors and the CoM path (PNG)"
+    )
+    parser.add_argument(
+        "--viewer",
+        action="store_true",
+        help="show the robot in a meshcat viewer (prints its address) and run at real time",
+    )
+    parser.add_argument(
+        "--target-offset",
+        type=finite_float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="target minus the wrist's start, world axes, m (default: a reachable point "
+        "0.2-0.25 m forward and up)",
+    )
+    parser.add_argument(
+        "--margin",
+        type=non_negative_float,
+        default=d["margin"],
+        metavar="M",
+        help=f"the CoM stays this far inside the support polygon, m (default {d['margin']:g})",
+    )
+    parser.add_argument(
+        "--damping",
+        type=non_negative_float,
+        default=0.0,
+        metavar="L",
+        help="the SOT's damping, for targets out of reach (default 0: exact levels)",
+    )
+
+
+def reach_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo <robot>`` with the parsed options: 0 when every check of the
+    demo holds (wrist at the target, or stopped at the best reachable point; feet
+    fixed; CoM inside; joints within their limits), 1 otherwise or on an error, 130 on
+    Ctrl-C."""
+    from ..errors import SotpyError
+    from .reach import run_reach
+
+    name = f"sotpy demo {args.robot}"
+    try:
+        result = run_reach(
+            robot=args.robot,
+            duration=args.duration,
+            dt=args.dt,
+            target_offset=args.target_offset,
+            plot=args.plot,
+            viewer=args.viewer,
+            margin=args.margin,
+            damping=args.damping,
+        )
+    except SotpyError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted (the viewer is closed)", file=sys.stderr)
+        return 130
+    failed = [k for k, v in result["checks"].items() if not v]
+    verdict = "OK" if result["ok"] else f"FAILED ({', '.join(failed)})"
+    print(
+        f"reach {verdict}: {result['robot']}, {result['ticks']} ticks in "
         f"{result['wall_time']:.2f} s"
     )
     return 0 if result["ok"] else 1

@@ -40,12 +40,15 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
 
 from ..errors import RobotDescriptionError, RobotError, RobotNotFoundError
+
+if TYPE_CHECKING:  # for the annotation only: no import of the tasks layer at run time
+    from ..tasks.ready import ReadyTasks
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -176,6 +179,25 @@ class Robot:
 
     def __post_init__(self) -> None:
         self._data = self.model.createData()
+
+    @property
+    def tasks(self) -> ReadyTasks:
+        """The robot's ready tasks: ``robot.tasks["left-ankle"]``, ``["right-wrist"]``,
+        ``["gaze"]``, ``["com"]``, ``["posture"]``, ... (a
+        :class:`sotpy.tasks.ready.ReadyTasks`: key -> meta-task, created on first access
+        and cached; ``list(robot.tasks)`` gives the keys).
+
+        The module is imported here, on first use, not at the top of this file: the
+        tasks layer imports the dynamics layer, and the dynamics layer must not import
+        the tasks layer at module level (DESIGN.md), so that loading a robot does not
+        need (or create) any task.
+        """
+        ready = self.__dict__.get("_readyTasks")
+        if ready is None:
+            from ..tasks.ready import ReadyTasks
+
+            ready = self.__dict__["_readyTasks"] = ReadyTasks(self)
+        return ready
 
     @property
     def nActuated(self) -> int:
