@@ -7,6 +7,9 @@
     sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
                                [--target-offset X Y Z] [--margin M] [--damping L]
     sotpy robots
+    sotpy shell [ROBOT] [--dt S] [--no-ipython]
+    sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
+    sotpy connect [--connection-file PATH]
 
 Each sub-command is a function ``add_<name>(subparsers)`` that adds its parser and sets
 ``func`` (the function run with the parsed arguments, returning the exit code); add a
@@ -149,7 +152,143 @@ def add_robots(subparsers: Any) -> None:
     p.set_defaults(func=_robots_run)
 
 
+# -- shell, serve, connect -------------------------------------------------------------
+def _robot_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "robot", nargs="?", default="talos", metavar="ROBOT", help="robot (sotpy robots)"
+    )
+    p.add_argument("--dt", type=positive_float, default=1e-3, metavar="S", help="loop period, s")
+
+
+def _shell_run(args: argparse.Namespace) -> int:
+    from .errors import SotpyError
+    from .shell import interact, makeNamespace
+
+    try:
+        ns = makeNamespace(args.robot, args.dt)
+    except SotpyError as exc:
+        print(f"sotpy shell: {exc}", file=sys.stderr)
+        return 1
+    try:
+        interact(ns, ipython=False if args.no_ipython else None)
+    finally:
+        if ns.get("loop") is not None:
+            ns["loop"].stop()
+    return 0
+
+
+def add_shell(subparsers: Any) -> None:
+    """``sotpy shell [ROBOT]``: an interactive console over the robot's graph."""
+    p = subparsers.add_parser(
+        "shell",
+        help="interactive console with a robot's graph and its control loop (paused)",
+        description="An interactive console (IPython if installed) with the robot loaded, "
+        "a ControlLoop 'loop' started paused, the entities in the namespace and the "
+        "helpers start(), stop(), step(n), stats(), writeGraph(path). See docs/shell.md.",
+    )
+    _robot_arg(p)
+    p.add_argument("--no-ipython", action="store_true", help="use the standard console")
+    p.set_defaults(func=_shell_run)
+
+
+def _serve_run(args: argparse.Namespace) -> int:
+    import logging
+    import signal
+    import time
+
+    from .errors import SotpyError
+    from .remote import RemoteServer, defaultConnectionFile
+    from .shell import makeNamespace
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    try:
+        ns = makeNamespace(args.robot, args.dt)
+    except SotpyError as exc:
+        print(f"sotpy serve: {exc}", file=sys.stderr)
+        return 1
+    path = args.connection_file or defaultConnectionFile()
+    try:
+        server = RemoteServer(ns, host=args.host, port=args.port, connectionFile=path)
+    except OSError as exc:
+        print(f"sotpy serve: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        return 1
+    loop = ns["loop"]
+
+    def _terminate(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        server.start()  # writes the connection file
+        if not args.paused:
+            loop.start()
+        host, port = server.address
+        print(
+            f"sotpy serve: {args.robot} loop {'paused' if args.paused else 'running'} at "
+            f"{1 / args.dt:g} Hz; remote interpreter on {host}:{port}; token in {path}",
+            flush=True,
+        )
+        while True:
+            time.sleep(3600)  # SIGINT/SIGTERM raise KeyboardInterrupt here
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+        loop.stop()
+        print(f"sotpy serve: stopped\n{loop.stats()}", flush=True)
+    return 0
+
+
+def add_serve(subparsers: Any) -> None:
+    """``sotpy serve [ROBOT]``: the loop plus a remote interpreter."""
+    p = subparsers.add_parser(
+        "serve",
+        help="run the control loop with a remote interpreter (sotpy connect)",
+        description="Load the robot, run its ControlLoop in real time and serve a remote "
+        "interpreter on HOST:PORT; clients must present the token written to the "
+        "connection file (mode 0600). Ctrl-C or SIGTERM stops. See docs/shell.md.",
+    )
+    _robot_arg(p)
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+    p.add_argument("--port", type=int, default=0, help="TCP port (0: a free one)")
+    p.add_argument("--connection-file", metavar="PATH", help="where to write address+token")
+    p.add_argument("--paused", action="store_true", help="do not start the loop")
+    p.set_defaults(func=_serve_run)
+
+
+def _connect_run(args: argparse.Namespace) -> int:
+    from .errors import SotpyError
+    from .remote import RemoteClient
+
+    try:
+        client = RemoteClient.fromFile(args.connection_file)
+    except SotpyError as exc:
+        print(f"sotpy connect: {exc}", file=sys.stderr)
+        return 1
+    try:
+        client.interact()
+    except SotpyError as exc:
+        print(f"sotpy connect: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        client.close()
+    return 0
+
+
+def add_connect(subparsers: Any) -> None:
+    """``sotpy connect``: a console whose lines run in a ``sotpy serve`` process."""
+    p = subparsers.add_parser(
+        "connect",
+        help="open a console on a running 'sotpy serve'",
+        description="A console whose lines run in the 'sotpy serve' process (address and "
+        "token from the connection file). Ctrl-D leaves; the server keeps running.",
+    )
+    p.add_argument("--connection-file", metavar="PATH", help="written by sotpy serve")
+    p.set_defaults(func=_connect_run)
+
+
 SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots]
+SUBCOMMANDS += [add_shell, add_serve, add_connect]
 
 
 # -- entry point -----------------------------------------------------------------------

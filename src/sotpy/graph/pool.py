@@ -6,7 +6,11 @@ There is one :data:`pool` per process: it is the only global state of sotpy. It 
 - the current tick :attr:`Pool.time` (the latest tick any signal was computed or written
   at; ``sig.value`` reads at this tick),
 - a topology counter :attr:`Pool.version`, bumped on every plug, unplug, dependency or
-  mode change, which tells compiled plans to recompile.
+  mode change, which tells compiled plans to recompile,
+- :attr:`Pool.lock`, a re-entrant lock held by a running loop
+  (:class:`sotpy.loop.ControlLoop`) during each tick; hold it to edit the graph
+  atomically from another thread (the shell and the remote interpreter hold it while
+  they execute each input). Signals never take it: a tick pays one acquire/release.
 
 :data:`factory` maps class names to entity classes; a subclass of ``Entity`` registers
 itself when it is defined.
@@ -14,6 +18,7 @@ itself when it is defined.
 
 from __future__ import annotations
 
+import threading
 from typing import TYPE_CHECKING, Any
 
 from ..errors import EntityError, FactoryError, SignalNotFoundError
@@ -32,6 +37,9 @@ class Pool:
         self._entities: dict[str, Entity] = {}
         self.time: int = 0
         self.version: int = 0
+        #: Held by a running loop during each tick; hold it to edit the graph atomically
+        #: from another thread (``with pool.lock: ...``). Re-entrant.
+        self.lock: threading.RLock = threading.RLock()
 
     # -- entities ---------------------------------------------------------------------
     def register(self, entity: Entity) -> None:

@@ -1,0 +1,585 @@
+"""The control loop: ticks a device at a fixed rate, in a background thread or in yours.
+
+::
+
+    from sotpy.loop import ControlLoop
+
+    loop = ControlLoop("loop", robot.device, 0.001)  # dt = 1 ms: 1 kHz
+    loop.start()            # background thread, real-time pacing
+    with loop.edit():       # from another thread: an edit no tick sees half done
+        plug(sot.control, robot.device.control)
+    print(loop.stats())     # tick time, jitter, deadline misses
+    loop.stop()
+    loop.step(100)          # 100 ticks now, in this thread, as fast as possible
+    loop.run(1000)          # 1000 ticks now, in this thread, paced at dt
+
+A tick is ``device.increment(dt)``, run while holding :attr:`pool.lock
+<sotpy.graph.pool.Pool.lock>`. Everything that edits the graph from another thread
+holds the same lock (the shell and the remote interpreter hold it while they execute
+each input; a script uses ``with loop.edit():``), so a tick never sees half an edit
+and an edit never interleaves with a tick. Signals do not lock: the cost per tick is
+one acquire and release of an uncontended ``RLock`` and a few clock reads
+(``BENCHMARKS.md``, "Control loop: pacing").
+
+Pacing
+------
+Tick ``k`` of a run is due at the absolute deadline ``t0 + k dt`` (``t0`` the start,
+``time.perf_counter_ns``), never ``previous end + dt``, so the rate does not drift.
+The thread waits for a deadline with ``Event.wait`` until ``spin`` seconds before it
+(default 200 us) and then yields (``time.sleep(0)``, which releases the GIL) until the
+deadline: sleeping alone wakes 50-100 us late on Linux.
+
+What is measured (:meth:`ControlLoop.stats`, a :class:`LoopStats`):
+
+* the **tick time**: ``device.increment`` alone, in s (mean, p99, max);
+* the **latency** (jitter): how late each tick started after its deadline, in s
+  (mean, p99, max), including the wait for the lock when the shell held it;
+* a **deadline miss**: a tick that ended after the next tick's deadline (it overran
+  its period). Misses are counted, never silent; when the loop falls more than one
+  period behind, the missed deadlines are **skipped** (counted in ``skipped``) rather
+  than run back to back: the ticks stay on the ``t0 + k dt`` grid, and simulated time
+  falls behind real time by ``skipped * dt``.
+
+p99 and the means are over the last ``window`` ticks (default 10,000); max, counts and
+the achieved rate (tick starts per second) are over the whole run since ``start``,
+``run`` or ``resetStats``.
+
+Safe stop on an exception
+-------------------------
+An exception raised during a tick (by any callback upstream of the control, by the
+device's checks, by a ``before``/``after`` signal) stops the loop, is logged on the
+``sotpy.loop`` logger and recorded as :attr:`ControlLoop.fault` (a :class:`LoopFault`
+naming the tick, the entity and the signal being computed, and the traceback). The
+device is then made safe by setting its ``control`` input to a constant (this unplugs
+it; the previous source is remembered):
+
+* ``'velocity'`` control: zero velocity (the robot stops where it is);
+* ``'acceleration'`` control: the velocity is set to zero (``device.setVelocity``) and
+  the control to zero acceleration: the robot holds its position;
+* ``'torque'`` control: the last torque computed without error (recorded after each
+  good tick); if the fault happens before any good tick, gravity compensation
+  ``g(q)`` for a fixed-base robot, or zero torque for a floating base (a floating
+  robot cannot be gravity-compensated without its contact forces).
+
+Further ticks (``step``, ``start``) are refused while the fault is pending: fix the
+graph, then :meth:`ControlLoop.recover` re-plugs the previous control source (or
+:meth:`ControlLoop.clearFault` keeps the safe constant). The calling thread (the
+shell) is never affected.
+
+Shutdown
+--------
+The loop is an entity: ``pool.remove(loop)`` or ``pool.clear()`` stops its thread
+(``onRemove``), as ``stop()`` does; the thread is a daemon, joined by ``stop``. If the
+device leaves the pool while the loop runs, the loop stops at its next tick and records
+a fault. ``stop()`` may be called while holding ``pool.lock`` (from the shell): the
+thread waits for the lock with a timeout and checks for a stop request meanwhile.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import threading
+import time
+import traceback
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import CommandError, EntityError, SotpyError
+from .graph import Entity, command
+from .graph.pool import pool
+from .graph.signal import Signal
+
+__all__ = [
+    "DEFAULT_SPIN",
+    "DEFAULT_WINDOW",
+    "ControlLoop",
+    "LoopFault",
+    "LoopStats",
+    "unlocked",
+]
+
+log = logging.getLogger("sotpy.loop")
+
+#: Default time spent yielding (instead of sleeping) before each deadline, in s.
+DEFAULT_SPIN = 200e-6
+#: Default number of recent ticks over which means and p99 are computed.
+DEFAULT_WINDOW = 10_000
+_LOCK_POLL = 0.05  # s: how often a thread waiting for pool.lock checks for a stop request
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    """Statistics of a :class:`ControlLoop` (times in s, rates in Hz).
+
+    ``tick_*``: duration of ``device.increment`` (mean and p99 over the last ``window``
+    ticks, max over the run). ``latency_*``: how late ticks started after their
+    deadline (real-time runs only; 0 otherwise). ``misses``: ticks that ended after the
+    next deadline; ``skipped``: deadlines dropped to catch up. ``rate``: ticks per
+    second of wall time, ``(ticks - 1) / (start of the last tick - start of the
+    first)`` (``nan`` before the second tick).
+    """
+
+    ticks: int
+    period: float
+    rate: float
+    tick_mean: float
+    tick_p99: float
+    tick_max: float
+    latency_mean: float
+    latency_p99: float
+    latency_max: float
+    misses: int
+    skipped: int
+    running: bool
+    realtime: bool
+    fault: str | None
+
+    def __str__(self) -> str:
+        us = 1e6
+        state = "running" if self.running else "stopped"
+        lines = [
+            f"{state}{' (real time)' if self.realtime else ''}: {self.ticks} ticks, "
+            f"period {self.period * 1e3:g} ms ({1 / self.period:g} Hz), achieved "
+            f"{self.rate:.1f} Hz",
+            f"tick     mean {self.tick_mean * us:8.1f} us  p99 {self.tick_p99 * us:8.1f} us  "
+            f"max {self.tick_max * us:8.1f} us",
+            f"latency  mean {self.latency_mean * us:8.1f} us  p99 {self.latency_p99 * us:8.1f} "
+            f"us  max {self.latency_max * us:8.1f} us",
+            f"deadline misses {self.misses}, skipped deadlines {self.skipped}",
+        ]
+        if self.fault:
+            lines.append(f"FAULT: {self.fault}")
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class LoopFault:
+    """An exception raised during a tick, and what the loop did about it.
+
+    ``tick``: the device's tick; ``entity``/``signal``: the entity (``Class(name)``) and
+    the signal (full SoT name) being computed when it was raised, when found (else ``None``);
+    ``exception``: the exception; ``traceback``: its formatted traceback; ``safe``:
+    what the device was set to.
+    """
+
+    tick: int
+    entity: str | None
+    signal: str | None
+    exception: BaseException
+    traceback: str
+    safe: str
+
+    def __str__(self) -> str:
+        where = self.signal or self.entity or "unknown signal"
+        return (
+            f"tick {self.tick}: {type(self.exception).__name__} in {where}: "
+            f"{self.exception}; {self.safe}"
+        )
+
+
+def _locate(tb: Any) -> tuple[str | None, str | None]:
+    """(entity, signal) of the innermost frame of ``tb`` computing a signal."""
+    entity = signal = None
+    frames = [f for f, _ in traceback.walk_tb(tb)]
+    for frame in reversed(frames):
+        loc = frame.f_locals
+        for key in ("self", "s", "node", "root", "h"):
+            obj = loc.get(key)
+            if isinstance(obj, Signal):
+                return f"{obj.entity.className}({obj.entity.name})", obj.name
+        obj = loc.get("self")
+        if entity is None and isinstance(obj, Entity):
+            entity = f"{obj.className}({obj.name})"
+            if obj.hasSignal(frame.f_code.co_name):
+                signal = obj.signal(frame.f_code.co_name).name
+                return entity, signal
+    return entity, signal
+
+
+@contextlib.contextmanager
+def unlocked() -> Iterator[None]:
+    """``with unlocked(): time.sleep(1)``: release :attr:`pool.lock` for the block.
+
+    The shell and the remote interpreter hold ``pool.lock`` while they run an input, so
+    the loop does not tick meanwhile; a long input (a wait, a plot) that does not edit
+    the graph can let it tick. Restores the lock (and its recursion depth) after.
+    Does nothing if the calling thread does not hold the lock.
+    """
+    lock = pool.lock
+    if not lock._is_owned():  # type: ignore[attr-defined]
+        yield
+        return
+    saved = lock._release_save()  # type: ignore[attr-defined]
+    try:
+        yield
+    finally:
+        lock._acquire_restore(saved)  # type: ignore[attr-defined]
+
+
+class ControlLoop(Entity):
+    """Ticks a device (``increment(dt)``) at ``1 / dt`` Hz; see the module doc.
+
+    ``ControlLoop(name, device, dt=0.001, spin=DEFAULT_SPIN, window=DEFAULT_WINDOW)``:
+    ``device`` an entity with ``increment(dt)`` (a :class:`~sotpy.dynamics.Device`),
+    ``dt`` the period in s (the device's time step and the real-time period), ``spin``
+    the time in s spent yielding before each deadline instead of sleeping, ``window``
+    the number of recent ticks the means and p99 are computed over.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        device: Any,
+        dt: float = 1e-3,
+        spin: float = DEFAULT_SPIN,
+        window: int = DEFAULT_WINDOW,
+    ) -> None:
+        who = f"{self.className}({name})"
+        if not callable(getattr(device, "increment", None)):
+            raise EntityError(f"{who}: expected a device with increment(dt), got {device!r}")
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            raise EntityError(f"{who}: dt must be a finite value > 0 s, got {dt!r}")
+        if not (math.isfinite(spin) and spin >= 0):
+            raise EntityError(f"{who}: spin must be a finite value >= 0 s, got {spin!r}")
+        if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+            raise EntityError(f"{who}: window must be an integer >= 1, got {window!r}")
+        self._device = device
+        self._dt = float(dt)
+        self._spin_ns = int(spin * 1e9)
+        self._window = window
+        self._thread: threading.Thread | None = None
+        self._stopEvent = threading.Event()
+        self._state = threading.Lock()  # guards _thread and the run bookkeeping
+        self._fault: LoopFault | None = None
+        self._unplugged: Any = None  # (source or None, constant) before the safe stop
+        self._lastTorque: np.ndarray | None = None
+        self._realtime = False
+        self.resetStats()
+
+    # -- properties ------------------------------------------------------------------
+    @property
+    def device(self) -> Any:
+        """The device this loop ticks."""
+        return self._device
+
+    @property
+    def dt(self) -> float:
+        """The period, in s."""
+        return self._dt
+
+    @property
+    def fault(self) -> LoopFault | None:
+        """The pending fault (an exception raised in a tick), or None."""
+        return self._fault
+
+    @property
+    def running(self) -> bool:
+        """Whether the background thread runs."""
+        th = self._thread
+        return th is not None and th.is_alive()
+
+    @property
+    def ticks(self) -> int:
+        """Ticks run since the last ``resetStats`` (or creation)."""
+        return self._count
+
+    # -- commands --------------------------------------------------------------------
+    @command
+    def start(self, ticks: int | None = None) -> None:
+        """Start ticking in a background thread at 1 / dt Hz (real-time pacing)
+
+        ticks: stop after that many ticks (None: until stop()). Refused while running or
+        while a fault is pending (see recover). The statistics restart.
+        """
+        with self._state:
+            self._checkCanTick("start")
+            if ticks is not None and ticks < 1:
+                raise CommandError(f"{self._who('start')}: ticks must be >= 1, got {ticks}")
+            self.resetStats()
+            self._stopEvent.clear()
+            self._realtime = True
+            self._thread = threading.Thread(
+                target=self._threadMain,
+                args=(ticks,),
+                name=f"{self.className}({self.name})",
+                daemon=True,
+            )
+            self._thread.start()
+
+    @command
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the background thread (after the tick in progress) and join it
+
+        Idempotent. Safe to call while holding pool.lock (from the shell).
+        """
+        self._stopEvent.set()
+        th = self._thread
+        if th is not None and th is not threading.current_thread():
+            th.join(timeout)
+            if th.is_alive():
+                raise SotpyError(
+                    f"{self._who('stop')}: the loop thread did not stop within {timeout:g} s "
+                    "(a tick is stuck)"
+                )
+        self._thread = None
+
+    @command
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the background thread to end (after start(ticks) or a fault)
+
+        Returns whether it has ended.
+        """
+        th = self._thread
+        if th is not None:
+            th.join(timeout)
+            return not th.is_alive()
+        return True
+
+    @command
+    def step(self, n: int = 1) -> None:
+        """Run n ticks now, in the calling thread, as fast as possible
+
+        Refused while the background thread runs or a fault is pending; a tick that
+        raises stops there (safe stop, see the module doc) and raises SotpyError.
+        """
+        self._runHere("step", n, realtime=False)
+
+    @command
+    def run(self, n: int, realtime: bool = True) -> None:
+        """Run n ticks now, in the calling thread, paced at dt (realtime) or not
+
+        As step, with real-time pacing by default; the statistics restart.
+        """
+        self.resetStats()
+        self._runHere("run", n, realtime=realtime)
+
+    @command
+    def stats(self) -> LoopStats:
+        """Tick time, latency (jitter), deadline misses and achieved rate (LoopStats)."""
+        n = self._count
+        k = min(n, self._window)
+        ticks = self._tickNs[:k]
+        lat = self._latNs[:k]
+        elapsed = self._lastBegin - self._firstBegin
+        rate = (n - 1) / (elapsed * 1e-9) if n > 1 and elapsed > 0 else math.nan
+        return LoopStats(
+            ticks=n,
+            period=self._dt,
+            rate=rate,
+            tick_mean=float(ticks.mean()) * 1e-9 if k else math.nan,
+            tick_p99=float(np.percentile(ticks, 99)) * 1e-9 if k else math.nan,
+            tick_max=self._tickMax * 1e-9 if k else math.nan,
+            latency_mean=float(lat.mean()) * 1e-9 if k else math.nan,
+            latency_p99=float(np.percentile(lat, 99)) * 1e-9 if k else math.nan,
+            latency_max=self._latMax * 1e-9 if k else math.nan,
+            misses=self._misses,
+            skipped=self._skipped,
+            running=self.running,
+            realtime=self._realtime,
+            fault=str(self._fault) if self._fault else None,
+        )
+
+    @command
+    def resetStats(self) -> None:
+        """Forget the statistics (tick count, times, misses)."""
+        self._tickNs = np.zeros(self._window, dtype=np.int64)
+        self._latNs = np.zeros(self._window, dtype=np.int64)
+        self._count = 0
+        self._tickMax = 0
+        self._latMax = 0
+        self._misses = 0
+        self._skipped = 0
+        self._firstBegin = self._lastBegin = 0
+
+    @command
+    def recover(self) -> None:
+        """Clear the pending fault and restore the control source the safe stop replaced
+
+        Re-plugs device.control to the output it was plugged to (or restores the
+        constant it held). Fix the cause first: the next tick would raise again.
+        """
+        if self._fault is None:
+            return
+        with pool.lock:
+            source, constant = self._unplugged
+            ctrl = self._device.control
+            if source is not None:
+                ctrl.plug(source)
+            elif constant is not None:
+                ctrl.value = constant
+            self._fault = None
+            self._unplugged = None
+
+    @command
+    def clearFault(self) -> None:
+        """Clear the pending fault, keeping the safe control constant on the device."""
+        self._fault = None
+        self._unplugged = None
+
+    @contextlib.contextmanager
+    def edit(self) -> Iterator[None]:
+        """``with loop.edit(): ...``: hold pool.lock, so no tick runs during the block."""
+        with pool.lock:
+            yield
+
+    def onRemove(self) -> None:
+        # the entity leaves the pool (pool.remove, pool.clear): the thread must end
+        if "_stopEvent" in self.__dict__:
+            self.stop()
+
+    # -- the loop --------------------------------------------------------------------
+    def _who(self, cmd: str) -> str:
+        return f"{self.className}({self.name}).{cmd}"
+
+    def _checkCanTick(self, cmd: str) -> None:
+        if self.running:
+            raise SotpyError(f"{self._who(cmd)}: the loop is running; call stop() first")
+        if self._fault is not None:
+            raise SotpyError(
+                f"{self._who(cmd)}: a fault is pending ({self._fault}); fix the graph, then "
+                "call recover() (re-plug the control) or clearFault() (keep the safe control)"
+            )
+
+    def _runHere(self, cmd: str, n: int, realtime: bool) -> None:
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise CommandError(f"{self._who(cmd)}: expected a number of ticks >= 0, got {n!r}")
+        with self._state:
+            self._checkCanTick(cmd)
+            self._stopEvent.clear()
+            self._realtime = realtime
+        if n and not self._loop(n, realtime):
+            raise SotpyError(f"{self._who(cmd)}: {self._fault}") from (
+                self._fault.exception if self._fault else None
+            )
+
+    def _threadMain(self, ticks: int | None) -> None:
+        try:
+            self._loop(ticks, True)
+        except BaseException:  # pragma: no cover - _loop catches everything it runs
+            log.exception("%s: the loop thread failed", self._who("start"))
+
+    def _loop(self, ticks: int | None, realtime: bool) -> bool:
+        """Run ``ticks`` ticks (None: until stopped); False if a tick raised."""
+        lock = pool.lock
+        clock = time.perf_counter_ns
+        stop = self._stopEvent
+        increment = self._device.increment
+        dt = self._dt
+        period = round(dt * 1e9)
+        spin = self._spin_ns
+        window = self._window
+        tickNs, latNs = self._tickNs, self._latNs
+        torque = self._device.getControlType() == "torque" if self._hasControlType() else False
+        version = -1
+        deadline = clock()
+        done = 0
+        while ticks is None or done < ticks:
+            if realtime:
+                now = clock()
+                if now < deadline - spin and stop.wait((deadline - spin - now) * 1e-9):
+                    return True
+                while clock() < deadline:
+                    time.sleep(0)
+            if stop.is_set():
+                return True
+            while not lock.acquire(timeout=_LOCK_POLL):
+                if stop.is_set():
+                    return True
+            try:
+                begin = clock()
+                if pool.version != version:  # topology changed: is the device still here?
+                    version = pool.version
+                    self._checkDevice()
+                    torque = self._hasControlType() and self._device.getControlType() == "torque"
+                if torque:
+                    t = max(self._device.state.time, 0)
+                increment(dt)
+                if torque:
+                    self._lastTorque = np.array(self._device.control(t), dtype=np.float64)
+                end = clock()
+            except Exception as exc:
+                self._safeStop(exc)
+                return False
+            finally:
+                lock.release()
+            i = self._count % window
+            tickNs[i] = d = end - begin
+            if d > self._tickMax:
+                self._tickMax = d
+            if realtime:
+                latNs[i] = lat = begin - deadline
+                if lat > self._latMax:
+                    self._latMax = lat
+                deadline += period
+                if end > deadline:
+                    self._misses += 1
+                    behind = (end - deadline) // period
+                    if behind:
+                        self._skipped += behind
+                        deadline += behind * period
+            if not self._count:
+                self._firstBegin = begin
+            self._count += 1
+            self._lastBegin = begin
+            done += 1
+        return True
+
+    def _hasControlType(self) -> bool:
+        return callable(getattr(self._device, "getControlType", None))
+
+    def _checkDevice(self) -> None:
+        dev = self._device
+        name = getattr(dev, "name", None)
+        if name is not None and not (pool.hasEntity(name) and pool.getEntity(name) is dev):
+            raise EntityError(
+                f"{self.className}({self.name}): its device {name!r} left the pool; the loop stops"
+            )
+
+    def _safeStop(self, exc: Exception) -> None:
+        """Record the fault and make the device safe (called holding pool.lock)."""
+        dev = self._device
+        entity, signal = _locate(exc.__traceback__)
+        tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+        try:
+            safe = self._makeSafe()
+        except Exception as inner:  # the device itself is broken: say so, keep going
+            safe = f"could not make the device safe: {type(inner).__name__}: {inner}"
+        tick = getattr(getattr(dev, "state", None), "time", -1)
+        self._fault = LoopFault(tick, entity, signal, exc, tb, safe)
+        self._stopEvent.set()
+        log.error("%s: %s\n%s", f"{self.className}({self.name})", self._fault, tb)
+
+    def _makeSafe(self) -> str:
+        dev = self._device
+        if not (self._hasControlType() and hasattr(dev, "control")):
+            return "the device has no control input to make safe"
+        ctrl = dev.control
+        if self._unplugged is None:
+            constant = ctrl.value if ctrl.source is None and ctrl.isPlugged else None
+            self._unplugged = (ctrl.source, constant)
+        kind = dev.getControlType()
+        n = dev.getControlSize()
+        if kind == "velocity":
+            ctrl.value = np.zeros(n)
+            return "device.control set to zero velocity (re-plug with recover())"
+        if kind == "acceleration":
+            dev.setVelocity(np.zeros(dev.model.nv))
+            ctrl.value = np.zeros(n)
+            return "velocity set to zero and device.control to zero acceleration: holding position"
+        if self._lastTorque is not None and self._lastTorque.shape == (n,):
+            ctrl.value = self._lastTorque
+            return "device.control holds the last torque computed without error"
+        if not dev.hasFreeFlyer:
+            import pinocchio as pin
+
+            q = dev.state(max(dev.state.time, 0))
+            g = pin.computeGeneralizedGravity(dev.model, dev.model.createData(), q)
+            ctrl.value = np.asarray(g)[dev.model.nv - n :]
+            return "device.control set to gravity compensation g(q) (no good torque yet)"
+        ctrl.value = np.zeros(n)
+        return "device.control set to zero torque (floating base, no good torque yet): UNSAFE"
