@@ -6,6 +6,7 @@
     sotpy demo robot [--robot NAME] [--duration S] [--viewer] [--dt S]
     sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
                                [--target-offset X Y Z] [--margin M] [--damping L]
+    sotpy demo panda-torque [--duration S] [--strategy NAME] [--plot PATH]
     sotpy robots
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
     sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
@@ -31,6 +32,8 @@ from .demos import (
     reach_run,
     robot_options,
     robot_run,
+    torque_options,
+    torque_run,
 )
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
@@ -84,6 +87,12 @@ DEMOS: dict[
         robot_run,
     ),
 }
+DEMOS["panda-torque"] = (
+    "torque control (ORCA-style): the Panda follows a minimum-jerk Cartesian trajectory "
+    "with torque, position and velocity limits; --plot",
+    torque_options,
+    torque_run,
+)
 for _robot in REACH_ROBOTS:
     DEMOS[_robot] = (
         f"the SoT slides' reaching demo on {_robot.capitalize()}: feet fixed, CoM over the "

@@ -28,12 +28,15 @@ __all__ = [
     "REACH_DEMO_DEFAULTS",
     "REACH_ROBOTS",
     "ROBOT_DEMO_DEFAULTS",
+    "TORQUE_STRATEGIES",
     "finite_float",
     "positive_float",
     "reach_options",
     "reach_run",
     "robot_options",
     "robot_run",
+    "torque_options",
+    "torque_run",
 ]
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
@@ -220,3 +223,51 @@ def reach_run(args: argparse.Namespace) -> int:
         f"{result['wall_time']:.2f} s"
     )
     return 0 if result["ok"] else 1
+
+
+# -- sotpy demo panda-torque --------------------------------------------------------
+#: strategies of the torque-level controller (``sotpy.solvers.wbc.STRATEGIES``, not
+#: imported here so that building the parser does not import Pinocchio)
+TORQUE_STRATEGIES = ("OneLevelWeighted", "MultiLevelWeighted")
+
+
+def torque_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ``sotpy demo panda-torque``: ``--duration S``, ``--strategy``,
+    ``--plot PATH``."""
+    parser.add_argument(
+        "--duration",
+        type=positive_float,
+        default=2.0,
+        metavar="S",
+        help="duration of the minimum-jerk trajectory, s (then 0.5 s at the goal)",
+    )
+    parser.add_argument(
+        "--strategy",
+        choices=TORQUE_STRATEGIES,
+        default="OneLevelWeighted",
+        help="resolution strategy of the controller",
+    )
+    parser.add_argument("--plot", metavar="PATH", help="save torques and tracking error (PNG)")
+
+
+def torque_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo panda-torque``: 0 when the hand ends within 1 mm of the goal
+    with a solution at every tick, 1 otherwise or on an error."""
+    from ..errors import SotpyError
+    from .torque import run_panda_torque
+
+    try:
+        out = run_panda_torque(duration=args.duration, strategy=args.strategy, plot=args.plot)
+    except SotpyError as exc:
+        print(f"sotpy demo panda-torque: {exc}", file=sys.stderr)
+        return 1
+    ok = out["final_error"] < 1e-3 and out["solution_found"]
+    print(
+        f"panda-torque {'OK' if ok else 'FAILED'}: final error {1e3 * out['final_error']:.3f} mm,"
+        f" max tracking error {1e3 * out['max_tracking_error']:.3f} mm,"
+        f" max |tau|/limit {out['max_torque_ratio']:.2f},"
+        f" solution every tick: {out['solution_found']}"
+    )
+    if out["plot"]:
+        print(f"plot: {out['plot']}")
+    return 0 if ok else 1

@@ -6,6 +6,10 @@ minimum-norm solution among the optimal ones; :class:`HierarchySolver` is the pe
 version (buffers, QP problems and warm starts kept between calls) that the SOT entity
 keeps between ticks, and :class:`SOT` is that entity. See
 :mod:`sotpy.solvers.hierarchy` and ``docs/solvers.md``.
+
+The torque-level whole-body controller (ORCA-style) is :mod:`sotpy.solvers.wbc` (the
+numerical core) and :class:`sotpy.solvers.controller.Controller` (the entity); see
+``docs/torque-control.md``.
 """
 
 from ..errors import SolverError

@@ -1,0 +1,619 @@
+r"""Torque-level whole-body control in the graph: ``Controller`` and its servos.
+
+::
+
+    robot = load_robot("panda")
+    ctrl = Controller("ctrl", robot.dynamic)   # plugs position/velocity like the Dynamic
+    ctrl.addCartesianTask("ee", "panda_hand_tcp", 1.0, 0)   # input ctrl.ee (6: a_des)
+    ctrl.addJointTask("posture", 1e-3, 0)                   # input ctrl.posture (na)
+    ctrl.addTorqueLimits("torque")
+    servo = PoseServo("servo")                              # PD: desired acceleration
+    plug(ctrl.eePose, servo.position); plug(ctrl.eeVelocity, servo.velocity)
+    plug(servo.desiredAcceleration, ctrl.ee)
+    ctrl.activateTasksAndConstraints()
+    robot.device.setControlType("torque")
+    plug(ctrl.torque, robot.device.control)
+
+The numerics are :mod:`sotpy.solvers.wbc` (``WholeBodyController``); this entity reads
+the state and the tasks' desired values, and writes the solution. Tasks and constraints
+are objects owned by the controller (created by commands, addressed by name), as in
+ORCA's ``controller.addTask``; each task has an input signal of its name carrying its
+desired value (default zeros). Each tick (``dt``: the control period, s; the time is
+``t * dt``):
+
+* pass ``model``: Pinocchio at ``(q, v)``;
+* ``solution`` (size ``n``): ``chi = (a, tau, f)``; ``acceleration`` (nv), ``torque``
+  (na), ``wrenches`` (all contacts, LOCAL, force then torque), ``solutionFound``;
+* ``torque`` is ``tau`` minus ``S g(q)`` if ``setRemoveGravityTorques(True)`` and minus
+  ``S (b - g)`` (Coriolis and centrifugal) if ``setRemoveCoriolisTorques(True)`` (for
+  robots that compensate them below); ``solution`` keeps the full ``tau``;
+* no solution: ``solutionFound`` is False, a ``SotpyWarning`` is emitted once (until a
+  solution is found again), and the outputs are the fallback of
+  :mod:`sotpy.solvers.wbc.solver`: gravity compensation ``S g(q)`` (clipped to the
+  torque limits), ``a = 0``, ``f = 0``.
+
+For the servos: ``<task>Pose`` (SE3) and ``<task>Velocity`` (6, LOCAL_WORLD_ALIGNED:
+origin velocity and angular velocity, world axes) of each Cartesian task, ``com`` and
+``comVelocity`` (3, world), ``jointPosition`` and ``jointVelocity`` (na, the actuated
+joints; models whose actuated joints are all one-dimensional).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from ..dynamics.types import SE3
+from ..errors import EntityError, SotpyError, SotpyWarning
+from ..graph import BOOL, DOUBLE, INT, VECTOR, Entity, Input, Output, OutputSignal, command, plug
+from ..graph.signal import InputSignal
+from .wbc import (
+    CartesianAccelerationTask,
+    CoMAccelerationTask,
+    ContactSpec,
+    JointAccelerationLimit,
+    JointAccelerationTask,
+    JointPositionLimit,
+    JointTorqueLimit,
+    JointVelocityLimit,
+    RegularisationTask,
+    Solution,
+    Task,
+    TorqueTask,
+    WholeBodyController,
+    WrenchTask,
+    check_gains,
+    joint_pd,
+    min_jerk,
+    pose_pd,
+)
+
+__all__ = ["ComServo", "Controller", "JointServo", "MinJerk", "PoseServo"]
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
+
+
+class Controller(Entity):
+    """Torque-level whole-body QP controller (ORCA-style); see the module doc."""
+
+    position = Input(VECTOR, doc="q: Pinocchio configuration (nq)")
+    velocity = Input(VECTOR, doc="v: tangent velocity (nv)")
+    dt = Input(DOUBLE, default=0.001, doc="control period (s): ramps and callbacks' time")
+
+    @Output(INT, deps=("position", "velocity"), withTime=True)
+    def model(self, t: int, q: np.ndarray, v: np.ndarray) -> int:
+        """Pass: Pinocchio at (q, v) (tick)."""
+        try:
+            self.core.robot.update(q, v)
+        except SotpyError as exc:
+            raise SotpyError(f"{self.model_signal_name()}: {exc}") from None
+        return t
+
+    @Output(VECTOR, timeDependent=False, withTime=True, doc="chi = (a, tau, f)")
+    def solution(self, t: int, _model: int, dt: float, *desired: Any) -> np.ndarray:
+        """Solve the tick's QP (see the module doc)."""
+        for task, value in zip(self._inputTasks, desired, strict=True):
+            try:
+                task.setDesired(value)
+            except SotpyError as exc:
+                raise SotpyError(
+                    f"{self.className}({self.name})::input(vector)::{task.name}: {exc}"
+                ) from None
+        sol = self.core.tick(t * dt, dt)
+        self._last = sol
+        if not sol.found:
+            if not self._warned:
+                self._warned = True
+                warnings.warn(
+                    f"{self.className}({self.name}): no solution at tick {t} ({sol.reason}); "
+                    "output: the fallback (gravity compensation torque)",
+                    SotpyWarning,
+                    stacklevel=2,
+                )
+        else:
+            self._warned = False
+        return sol.chi.copy()
+
+    @Output(VECTOR, deps=("solution",), doc="torque command tau (na, N m), minus removed terms")
+    def torque(self, _chi: np.ndarray) -> np.ndarray:
+        """The torque command (module doc)."""
+        tau = self._last.tau.copy()
+        robot = self.core.robot
+        if self._removeGravity:
+            tau -= robot.S @ robot.g
+        if self._removeCoriolis:
+            tau -= robot.S @ (robot.b - robot.g)
+        return tau
+
+    @Output(VECTOR, deps=("solution",), doc="acceleration command a (nv)")
+    def acceleration(self, _chi: np.ndarray) -> np.ndarray:
+        return self._last.a.copy()
+
+    @Output(VECTOR, deps=("solution",), doc="contact wrenches (LOCAL, force then torque)")
+    def wrenches(self, _chi: np.ndarray) -> np.ndarray:
+        return self._last.f.copy()
+
+    @Output(BOOL, deps=("solution",), doc="whether the QP was solved (False: fallback)")
+    def solutionFound(self, _chi: np.ndarray) -> bool:
+        return bool(self._last.found)
+
+    @Output(VECTOR, deps=("model",), doc="CoM (3, m, world)")
+    def com(self, _m: int) -> np.ndarray:
+        return self.core.robot.com
+
+    @Output(VECTOR, deps=("model",), doc="CoM velocity (3, m/s, world)")
+    def comVelocity(self, _m: int) -> np.ndarray:
+        return self.core.robot.com_velocity
+
+    @Output(VECTOR, deps=("model",), doc="actuated joint positions (na, rad)")
+    def jointPosition(self, _m: int) -> np.ndarray:
+        self._needOneDof("jointPosition")
+        return self.core.robot.q[self._iqa].copy()
+
+    @Output(VECTOR, deps=("model",), doc="actuated joint velocities (na, rad/s)")
+    def jointVelocity(self, _m: int) -> np.ndarray:
+        return self.core.robot.v[self.core.robot.actuated].copy()
+
+    def __init__(self, name: str, dynamic: Entity) -> None:
+        model = getattr(dynamic, "model", None)
+        if not isinstance(model, pin.Model):
+            raise EntityError(f"Controller({name}): expected a Dynamic entity, got {dynamic!r}")
+        self.core = WholeBodyController(model)
+        self._last: Solution = Solution(
+            np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), False, "not solved yet"
+        )
+        self._warned = False
+        self._removeGravity = False
+        self._removeCoriolis = False
+        self._inputTasks: list[Task] = []
+        robot = self.core.robot
+        iq = [
+            model.joints[j].idx_q
+            for j in range(1, model.njoints)
+            if model.joints[j].nq == 1 and model.joints[j].idx_v in set(robot.actuated.tolist())
+        ]
+        self._iqa = np.array(iq, dtype=int)
+        for sig in ("position", "velocity"):
+            src = dynamic.signal(sig).source
+            if src is not None:
+                plug(src, self.signal(sig))
+        self.velocity.setDefault(np.zeros(model.nv))
+        self._rewire()
+
+    def model_signal_name(self) -> str:
+        return self.signal("model").name
+
+    def _needOneDof(self, what: str) -> None:
+        if len(self._iqa) != self.core.robot.na:
+            raise SotpyError(
+                f"{self.className}({self.name})::{what}: actuated joints are not all 1-D"
+            )
+
+    def _who(self, cmd: str) -> str:
+        return f"{self.className}({self.name}).{cmd}"
+
+    def _rewire(self) -> None:
+        self._inputTasks = [t for t in self.core.tasks.values() if self.hasSignal(t.name)]
+        self.solution.setDependencies(
+            [self.signal("model"), self.dt] + [self.signal(t.name) for t in self._inputTasks]
+        )
+
+    def _addTask(self, cmd: str, task: Task) -> None:
+        if self.hasSignal(task.name) or self.hasSignal(task.name + "Pose"):
+            raise SotpyError(f"{self._who(cmd)}: the name {task.name!r} is taken by a signal")
+        try:
+            self.core.addTask(task)
+        except SotpyError as exc:
+            raise SotpyError(f"{self._who(cmd)}: {exc}") from None
+        self.addSignal(
+            InputSignal(
+                self, task.name, VECTOR, np.zeros(task.size), doc=f"desired value of {task.name}"
+            )
+        )
+        self._rewire()
+
+    def _task(self, cmd: str, name: str) -> Task:
+        if name not in self.core.tasks:
+            raise SotpyError(
+                f"{self._who(cmd)}: no task named {name!r} (tasks: {list(self.core.tasks)})"
+            )
+        return self.core.tasks[name]
+
+    def _item(self, cmd: str, name: str) -> Any:
+        item = self.core.tasks.get(name) or self.core.constraints.get(name)
+        if item is None:
+            raise SotpyError(f"{self._who(cmd)}: no task or constraint named {name!r}")
+        return item
+
+    def _wrap(self, cmd: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except SotpyError as exc:
+            raise SotpyError(f"{self._who(cmd)}: {exc}") from None
+
+    # -- tasks ------------------------------------------------------------------------------
+    @command
+    def addCartesianTask(self, name: str, frame: str, weight: float = 1.0, level: int = 0) -> None:
+        """Cartesian acceleration task of ``frame`` (LOCAL_WORLD_ALIGNED); input ``name``
+        (6: desired linear then angular acceleration, world axes), outputs
+        ``namePose`` and ``nameVelocity`` for its servo."""
+        task = self._wrap("addCartesianTask", CartesianAccelerationTask, name, frame, weight, level)
+        self._addTask("addCartesianTask", task)
+        robot = self.core.robot
+        fid = task.fid
+        model = self.signal("model")
+        self.addSignal(
+            OutputSignal(
+                self,
+                name + "Pose",
+                SE3,
+                lambda _m: robot.frame_placement(fid),
+                (model,),
+                doc="placement of the task frame",
+            )
+        )
+        self.addSignal(
+            OutputSignal(
+                self,
+                name + "Velocity",
+                VECTOR,
+                lambda _m: robot.frame_velocity(fid, _LWA),
+                (model,),
+                doc="velocity of the task frame (6, world axes)",
+            )
+        )
+
+    @command
+    def addJointTask(self, name: str, weight: float = 1.0, level: int = 0) -> None:
+        """Joint acceleration (posture) task; input ``name`` (na, rad/s^2)."""
+        self._addTask(
+            "addJointTask",
+            self._wrap(
+                "addJointTask", JointAccelerationTask, name, self.core.robot.na, weight, level
+            ),
+        )
+
+    @command
+    def addComTask(self, name: str, weight: float = 1.0, level: int = 0) -> None:
+        """CoM acceleration task; input ``name`` (3, m/s^2, world)."""
+        self._addTask(
+            "addComTask", self._wrap("addComTask", CoMAccelerationTask, name, weight, level)
+        )
+
+    @command
+    def addWrenchTask(self, name: str, frame: str, weight: float = 1.0, level: int = 0) -> None:
+        """Wrench task on the contact at ``frame``; input ``name`` (6 or 3, LOCAL)."""
+        sl = self.core.layout.f.get(frame)
+        if sl is None:
+            raise SotpyError(
+                f"{self._who('addWrenchTask')}: no contact at {frame!r} (addContact first)"
+            )
+        self._addTask(
+            "addWrenchTask",
+            self._wrap("addWrenchTask", WrenchTask, name, frame, sl.stop - sl.start, weight, level),
+        )
+
+    @command
+    def addTorqueTask(self, name: str, weight: float = 1.0, level: int = 0) -> None:
+        """Torque task; input ``name`` (na, N m)."""
+        self._addTask(
+            "addTorqueTask",
+            self._wrap("addTorqueTask", TorqueTask, name, self.core.robot.na, weight, level),
+        )
+
+    @command
+    def addRegularisationTask(self, name: str, weight: float = 1e-5, level: int = 0) -> None:
+        """Global regularisation ``chi = 0`` (input ``name``: the target, default 0)."""
+        self._addTask(
+            "addRegularisationTask",
+            self._wrap(
+                "addRegularisationTask", RegularisationTask, name, self.core.layout.n, weight, level
+            ),
+        )
+
+    @command
+    def setTaskWeight(self, name: str, weight: float) -> None:
+        self._wrap("setTaskWeight", self._task("setTaskWeight", name).setWeight, weight)
+        self.solution.setReady()
+
+    @command
+    def setTaskRowWeights(self, name: str, weights: np.ndarray) -> None:
+        self._wrap(
+            "setTaskRowWeights", self._task("setTaskRowWeights", name).setRowWeights, weights
+        )
+        self.solution.setReady()
+
+    @command
+    def setTaskSelection(self, name: str, selection: np.ndarray) -> None:
+        self._wrap("setTaskSelection", self._task("setTaskSelection", name).setSelection, selection)
+        self.solution.setReady()
+
+    @command
+    def setTaskLevel(self, name: str, level: int) -> None:
+        self._wrap("setTaskLevel", self._task("setTaskLevel", name).setLevel, level)
+        self.solution.setReady()
+
+    @command
+    def remove(self, name: str) -> None:
+        """Remove a task (and its signals) or a constraint."""
+        self._wrap("remove", self.core.remove, name)
+        for s in (name, name + "Pose", name + "Velocity"):
+            if self.hasSignal(s):
+                self.removeSignal(s)
+        self._rewire()
+
+    # -- constraints ------------------------------------------------------------------------
+    def _addConstraint(self, cmd: str, cls: Any, *args: Any) -> None:
+        c = self._wrap(cmd, cls, *args)
+        self._wrap(cmd, self.core.addConstraint, c)
+        self.solution.setReady()
+
+    @command
+    def addTorqueLimits(
+        self, name: str, lower: np.ndarray | None = None, upper: np.ndarray | None = None
+    ) -> None:
+        """``lower <= tau <= upper`` (default the model's effort limits)."""
+        self._addConstraint(
+            "addTorqueLimits", JointTorqueLimit, name, self.core.robot, lower, upper
+        )
+
+    @command
+    def addJointPositionLimits(self, name: str, horizon: float) -> None:
+        """``q + h v + h^2/2 a`` within the model's position limits."""
+        self._addConstraint(
+            "addJointPositionLimits", JointPositionLimit, name, self.core.robot, horizon
+        )
+
+    @command
+    def addJointVelocityLimits(self, name: str, horizon: float) -> None:
+        """``v + h a`` within the model's velocity limits."""
+        self._addConstraint(
+            "addJointVelocityLimits", JointVelocityLimit, name, self.core.robot, horizon
+        )
+
+    @command
+    def addJointAccelerationLimits(self, name: str, lower: np.ndarray, upper: np.ndarray) -> None:
+        """``lower <= a <= upper`` on the actuated joints (rad/s^2)."""
+        self._addConstraint(
+            "addJointAccelerationLimits",
+            JointAccelerationLimit,
+            name,
+            self.core.robot,
+            lower,
+            upper,
+        )
+
+    @command
+    def addContact(
+        self,
+        frame: str,
+        mu: float = 0.5,
+        length: float = 0.1,
+        width: float = 0.1,
+        offsetX: float = 0.0,
+        offsetY: float = 0.0,
+        dim: int = 6,
+        fmin: float = 0.0,
+    ) -> None:
+        """A unilateral contact at ``frame`` (z the normal; see ``ContactSpec``)."""
+        spec = ContactSpec(frame, dim, mu, length, width, (offsetX, offsetY), fmin)
+        self._wrap("addContact", self.core.setContacts, [*self.core.contacts, spec])
+        self.solution.setReady()
+
+    @command
+    def removeContact(self, frame: str) -> None:
+        left = [c for c in self.core.contacts if c.frame != frame]
+        if len(left) == len(self.core.contacts):
+            raise SotpyError(f"{self._who('removeContact')}: no contact at {frame!r}")
+        self._wrap("removeContact", self.core.setContacts, left)
+        self.solution.setReady()
+
+    @command
+    def getContacts(self) -> list[str]:
+        return [c.frame for c in self.core.contacts]
+
+    # -- strategy, options, life cycle ------------------------------------------------------
+    @command
+    def setResolutionStrategy(self, strategy: str) -> None:
+        """``"OneLevelWeighted"`` or ``"MultiLevelWeighted"``."""
+        self._wrap("setResolutionStrategy", self.core.setStrategy, strategy)
+        self.solution.setReady()
+
+    @command
+    def getResolutionStrategy(self) -> str:
+        return self.core.strategy
+
+    @command
+    def setRemoveGravityTorques(self, flag: bool) -> None:
+        self._removeGravity = flag
+        self.torque.setReady()
+
+    @command
+    def setRemoveCoriolisTorques(self, flag: bool) -> None:
+        self._removeCoriolis = flag
+        self.torque.setReady()
+
+    @command
+    def setRampDuration(self, name: str, duration: float) -> None:
+        self._wrap("setRampDuration", self._item("setRampDuration", name).setRampDuration, duration)
+
+    @command
+    def setCallback(self, name: str, event: str, fn: Any) -> None:
+        """Set ``event`` (onActivation, onActivated, onComputeBegin(t, dt),
+        onComputeEnd(t, dt), onDeactivation, onDeactivated) of a task or constraint."""
+        self._wrap("setCallback", self._item("setCallback", name).setCallback, event, fn)
+
+    @command
+    def activate(self, name: str) -> None:
+        self._item("activate", name).activate()
+        self.solution.setReady()
+
+    @command
+    def deactivate(self, name: str) -> None:
+        self._item("deactivate", name).deactivate()
+        self.solution.setReady()
+
+    @command
+    def activateTasksAndConstraints(self) -> None:
+        self.core.activateTasksAndConstraints()
+        self.solution.setReady()
+
+    @command
+    def deactivateTasksAndConstraints(self) -> None:
+        self.core.deactivateTasksAndConstraints()
+        self.solution.setReady()
+
+    @command
+    def tasksAndConstraintsDeactivated(self) -> bool:
+        return self.core.tasksAndConstraintsDeactivated()
+
+    @command
+    def lastSolution(self) -> Any:
+        """The last :class:`~sotpy.solvers.wbc.Solution` (reason, dynamics residual)."""
+        return self._last
+
+
+class PoseServo(Entity):
+    """PD on a pose: ``a_des = a_ff - Kp (p - p_d, log3(R R_d^T)) - Kd (nu - nu_d)``
+    (world axes; see :mod:`sotpy.solvers.wbc.servos`)."""
+
+    position = Input(SE3, doc="current placement")
+    velocity = Input(VECTOR, doc="current velocity (6, world axes)")
+    reference = Input(SE3, doc="desired placement")
+    referenceVelocity = Input(VECTOR, default=np.zeros(6), doc="desired velocity (6)")
+    referenceAcceleration = Input(VECTOR, default=np.zeros(6), doc="feed-forward (6)")
+    Kp = Input(VECTOR, default=np.full(6, 100.0), doc="proportional gains (6, 1/s^2)")
+    Kd = Input(VECTOR, default=np.zeros(0), doc="derivative gains (6, 1/s); empty: 2 sqrt(Kp)")
+
+    @Output(
+        VECTOR,
+        deps=(
+            "position",
+            "velocity",
+            "reference",
+            "referenceVelocity",
+            "referenceAcceleration",
+            "Kp",
+            "Kd",
+        ),
+    )
+    def desiredAcceleration(self, M, nu, Md, nud, ad, Kp, Kd) -> np.ndarray:
+        """Desired acceleration (6, world axes)."""
+        kp, kd = check_gains(f"{self.className}({self.name})", Kp, Kd, 6)
+        for n, x in (("velocity", nu), ("referenceVelocity", nud), ("referenceAcceleration", ad)):
+            if np.shape(x) != (6,):
+                raise SotpyError(
+                    f"{self.className}({self.name})::{n}: expected size 6, got {np.shape(x)}"
+                )
+        return pose_pd(M, nu, Md, nud, ad, kp, kd)
+
+    @Output(VECTOR, deps=("position", "reference"))
+    def error(self, M, Md) -> np.ndarray:
+        """Pose error (p - p_d, log3(R R_d^T)) (m, rad)."""
+        from .wbc import pose_error
+
+        return pose_error(M, Md)
+
+
+class _VectorServo(Entity):
+    size_doc = ""
+    position = Input(VECTOR, doc="current value")
+    velocity = Input(VECTOR, doc="current rate")
+    reference = Input(VECTOR, doc="desired value")
+    referenceVelocity = Input(VECTOR, default=np.zeros(0), doc="desired rate (empty: 0)")
+    referenceAcceleration = Input(VECTOR, default=np.zeros(0), doc="feed-forward (empty: 0)")
+    Kp = Input(VECTOR, default=np.full(1, 100.0), doc="proportional gains (one or per axis)")
+    Kd = Input(VECTOR, default=np.zeros(0), doc="derivative gains; empty: 2 sqrt(Kp)")
+
+    @Output(
+        VECTOR,
+        deps=(
+            "position",
+            "velocity",
+            "reference",
+            "referenceVelocity",
+            "referenceAcceleration",
+            "Kp",
+            "Kd",
+        ),
+    )
+    def desiredAcceleration(self, x, v, xd, vd, ad, Kp, Kd) -> np.ndarray:
+        """``a_d - Kp (x - x_d) - Kd (v - v_d)``."""
+        n = len(x)
+        who = f"{self.className}({self.name})"
+        for name, y in (("velocity", v), ("reference", xd)):
+            if len(y) != n:
+                raise SotpyError(f"{who}::{name}: expected size {n}, got {len(y)}")
+        vd = np.zeros(n) if len(vd) == 0 else vd
+        ad = np.zeros(n) if len(ad) == 0 else ad
+        if len(vd) != n or len(ad) != n:
+            raise SotpyError(f"{who}: referenceVelocity/referenceAcceleration must have size {n}")
+        kp, kd = check_gains(
+            who,
+            Kp[0] if len(Kp) == 1 else Kp,
+            None if len(Kd) == 0 else (Kd[0] if len(Kd) == 1 else Kd),
+            n,
+        )
+        return joint_pd(x, v, xd, vd, ad, kp, kd)
+
+
+class JointServo(_VectorServo):
+    """PD on the actuated joints (plug ``Controller.jointPosition``/``jointVelocity``)."""
+
+
+class ComServo(_VectorServo):
+    """PD on the CoM (plug ``Controller.com``/``comVelocity``)."""
+
+
+class MinJerk(Entity):
+    """Minimum-jerk pose trajectory: ``start``, ``goal``, ``duration`` (s), started by
+    ``start_(t0)``; outputs ``pose``, ``velocity`` and ``acceleration`` (6, world axes)
+    at ``(t - t0) * dt``."""
+
+    dt = Input(DOUBLE, default=0.001, doc="tick period (s)")
+
+    def __init__(self, name: str) -> None:
+        self._start: pin.SE3 | None = None
+        self._goal: pin.SE3 | None = None
+        self._duration = 1.0
+        self._t0 = 0
+
+    @command
+    def setTrajectory(self, start: pin.SE3, goal: pin.SE3, duration: float, t0: int = 0) -> None:
+        """From ``start`` at tick ``t0`` to ``goal`` in ``duration`` s."""
+        if not (math.isfinite(duration) and duration > 0):
+            raise SotpyError(
+                f"{self.className}({self.name}).setTrajectory: duration must be > 0, got {duration}"
+            )
+        self._start, self._goal, self._duration, self._t0 = (
+            pin.SE3(start),
+            pin.SE3(goal),
+            duration,
+            t0,
+        )
+        for s in ("pose", "velocity", "acceleration"):
+            self.signal(s).setReady()
+
+    def _at(self, t: int, dt: float) -> tuple[pin.SE3, np.ndarray, np.ndarray]:
+        if self._start is None:
+            raise SotpyError(f"{self.className}({self.name}): setTrajectory was not called")
+        return min_jerk(self._start, self._goal, self._duration, (t - self._t0) * dt)
+
+    @Output(SE3, deps=("dt",), withTime=True, timeDependent=True)
+    def pose(self, t: int, dt: float) -> pin.SE3:
+        """Desired placement."""
+        return self._at(t, dt)[0]
+
+    @Output(VECTOR, deps=("dt",), withTime=True, timeDependent=True)
+    def velocity(self, t: int, dt: float) -> np.ndarray:
+        """Desired velocity (6, world axes)."""
+        return self._at(t, dt)[1]
+
+    @Output(VECTOR, deps=("dt",), withTime=True, timeDependent=True)
+    def acceleration(self, t: int, dt: float) -> np.ndarray:
+        """Desired acceleration (6, world axes)."""
+        return self._at(t, dt)[2]

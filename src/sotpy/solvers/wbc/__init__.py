@@ -1,0 +1,65 @@
+"""Torque-level whole-body control in the style of ORCA: the numerical core (no graph).
+
+The decision vector is ``chi = (a, tau, f)`` (:mod:`.model`), the equations of motion
+``M a + b = S^T tau + J_c^T f`` a hard equality, tasks weighted least-squares rows
+(:mod:`.tasks`), constraints ``lb <= C chi <= ub`` (:mod:`.constraints`), resolved by
+one weighted QP or by strict levels (:mod:`.solver`); activation ramps and callbacks
+(:mod:`.activation`); servos and the minimum-jerk profile (:mod:`.servos`). The graph
+entities are in :mod:`sotpy.solvers.controller`. See ``docs/torque-control.md``.
+"""
+
+from .activation import CALLBACKS, Activatable
+from .constraints import (
+    Constraint,
+    ContactConstraint,
+    JointAccelerationLimit,
+    JointPositionLimit,
+    JointTorqueLimit,
+    JointVelocityLimit,
+    dynamics_rows,
+    friction_rows,
+)
+from .model import ContactSpec, Layout, RobotModel
+from .servos import check_gains, joint_pd, min_jerk, min_jerk_scalar, pose_error, pose_pd
+from .solver import STRATEGIES, Solution, WholeBodyController
+from .tasks import (
+    CartesianAccelerationTask,
+    CoMAccelerationTask,
+    JointAccelerationTask,
+    RegularisationTask,
+    Task,
+    TorqueTask,
+    WrenchTask,
+)
+
+__all__ = [
+    "CALLBACKS",
+    "STRATEGIES",
+    "Activatable",
+    "CartesianAccelerationTask",
+    "CoMAccelerationTask",
+    "Constraint",
+    "ContactConstraint",
+    "ContactSpec",
+    "JointAccelerationLimit",
+    "JointAccelerationTask",
+    "JointPositionLimit",
+    "JointTorqueLimit",
+    "JointVelocityLimit",
+    "Layout",
+    "RegularisationTask",
+    "RobotModel",
+    "Solution",
+    "Task",
+    "TorqueTask",
+    "WholeBodyController",
+    "WrenchTask",
+    "check_gains",
+    "dynamics_rows",
+    "friction_rows",
+    "joint_pd",
+    "min_jerk",
+    "min_jerk_scalar",
+    "pose_error",
+    "pose_pd",
+]

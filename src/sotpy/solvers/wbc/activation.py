@@ -1,0 +1,113 @@
+"""Gradual activation and deactivation of tasks and constraints (ORCA's life cycle).
+
+States and transitions (``dt`` the control period, ``T`` the ramp duration)::
+
+    inactive --activate()--> activating --(ramp reaches 1)--> active
+    active --deactivate()--> deactivating --(ramp reaches 0)--> inactive
+
+The ramp ``r`` goes linearly from 0 to 1 in ``T`` seconds (``r += dt / T`` each tick;
+``T = 0``: one tick) and back down. A task's weight is multiplied by ``r``; a
+constraint is enforced while it is not ``inactive`` (its bounds are not ramped).
+
+Callbacks (set with :meth:`Activatable.setCallback`, names as ORCA's):
+``onActivation()`` when ``activate()`` is called, ``onActivated()`` on the tick the ramp
+reaches 1, ``onComputeBegin(t, dt)`` and ``onComputeEnd(t, dt)`` around every tick's
+update of an object that is not inactive (``t`` in s), ``onDeactivation()`` when
+``deactivate()`` is called, ``onDeactivated()`` on the tick the ramp reaches 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from ...errors import SotpyError
+
+__all__ = ["CALLBACKS", "Activatable"]
+
+CALLBACKS = (
+    "onActivation",
+    "onActivated",
+    "onComputeBegin",
+    "onComputeEnd",
+    "onDeactivation",
+    "onDeactivated",
+)
+
+
+class Activatable:
+    """Activation state, ramp and callbacks shared by tasks and constraints."""
+
+    def __init__(self, name: str, ramp_duration: float = 0.0) -> None:
+        self.name = name
+        self.state = "inactive"
+        self.ramp = 0.0
+        self.setRampDuration(ramp_duration)
+        self.callbacks: dict[str, Callable[..., Any] | None] = dict.fromkeys(CALLBACKS)
+
+    def setRampDuration(self, duration: float) -> None:
+        """Duration (s, >= 0, finite) of the activation and deactivation ramps."""
+        d = float(duration)
+        if not (math.isfinite(d) and d >= 0.0):
+            raise SotpyError(f"{self.name}: the ramp duration must be finite and >= 0, got {d}")
+        self.ramp_duration = d
+
+    def setCallback(self, event: str, fn: Callable[..., Any] | None) -> None:
+        """Set (or clear with ``None``) the callback of ``event`` (one of CALLBACKS)."""
+        if event not in CALLBACKS:
+            raise SotpyError(
+                f"{self.name}: unknown callback {event!r}; expected one of {CALLBACKS}"
+            )
+        if fn is not None and not callable(fn):
+            raise SotpyError(f"{self.name}: the {event} callback must be callable, got {fn!r}")
+        self.callbacks[event] = fn
+
+    def _call(self, event: str, *args: Any) -> None:
+        fn = self.callbacks[event]
+        if fn is not None:
+            fn(*args)
+
+    def activate(self) -> None:
+        """Start the activation ramp (no effect if active or activating)."""
+        if self.state in ("inactive", "deactivating"):
+            self.state = "activating"
+            self._call("onActivation")
+
+    def deactivate(self) -> None:
+        """Start the deactivation ramp (no effect if inactive or deactivating)."""
+        if self.state in ("active", "activating"):
+            self.state = "deactivating"
+            self._call("onDeactivation")
+
+    @property
+    def isActivated(self) -> bool:
+        return self.state == "active"
+
+    @property
+    def isDeactivated(self) -> bool:
+        return self.state == "inactive"
+
+    def begin(self, t: float, dt: float) -> bool:
+        """Advance the ramp by ``dt`` and call ``onComputeBegin``; False if inactive."""
+        if self.state == "inactive":
+            return False
+        self._call("onComputeBegin", t, dt)
+        step = 1.0 if self.ramp_duration <= 0.0 else dt / self.ramp_duration
+        if self.state == "activating":
+            self.ramp = min(1.0, self.ramp + step)
+        elif self.state == "deactivating":
+            self.ramp = max(0.0, self.ramp - step)
+        return True
+
+    def end(self, t: float, dt: float) -> None:
+        """Call ``onComputeEnd`` and finish a ramp that reached its end."""
+        if self.state == "inactive":
+            return
+        self._call("onComputeEnd", t, dt)
+        if self.state == "activating" and self.ramp >= 1.0:
+            self.state = "active"
+            self._call("onActivated")
+        elif self.state == "deactivating" and self.ramp <= 0.0:
+            self.state = "inactive"
+            self._call("onDeactivated")

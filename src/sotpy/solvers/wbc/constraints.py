@@ -1,0 +1,248 @@
+r"""Constraints: rows ``lb <= C chi <= ub`` over ``chi = (a, tau, f)`` (hard).
+
+==========================  =================================================================
+constraint                  rows
+==========================  =================================================================
+dynamics (always on)        ``M a - S^T tau - sum_c J_c^T f_c = -b`` (equality, nv rows)
+JointTorqueLimit            ``tau_min <= tau <= tau_max`` (N m)
+JointPositionLimit(h)       ``q_min <= q + h v + h^2/2 a <= q_max`` for the 1-D joints
+                            with finite limits, horizon ``h`` (s)
+JointVelocityLimit(h)       ``v_min <= v + h a <= v_max`` (horizon ``h``, s)
+JointAccelerationLimit      ``a_min <= a <= a_max`` (actuated joints)
+ContactConstraint           per contact: ``J_c a + Jdot_c v = 0`` (LOCAL, the contact point
+                            does not accelerate; 6 rows, 3 for a point), and its
+                            friction/CoP polyhedron on ``f_c`` (LOCAL, z the normal):
+                            ``f_z >= fmin``, ``|f_x|, |f_y| <= mu/sqrt(2) f_z`` (inner
+                            pyramid of the cone); for 6-D contacts the CoP
+                            ``(-tau_y/f_z, tau_x/f_z)`` inside the rectangle
+                            ``[ox - L/2, ox + L/2] x [oy - W/2, oy + W/2]`` and
+                            ``|tau_z| <= mu min(L, W)/2 f_z`` (a conservative bound on the
+                            torsion)
+==========================  =================================================================
+
+The limits' infinite entries (or of magnitude >= 1e30, Pinocchio's "no limit") are
+dropped. A position limit already violated gives an infeasible row: the controller
+reports it (no solution) rather than hiding it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from ...errors import SotpyError
+from .activation import Activatable
+from .model import ContactSpec, Layout, RobotModel
+
+__all__ = [
+    "Constraint",
+    "ContactConstraint",
+    "JointAccelerationLimit",
+    "JointPositionLimit",
+    "JointTorqueLimit",
+    "JointVelocityLimit",
+    "dynamics_rows",
+    "friction_rows",
+]
+
+_NO_LIMIT = 1e30
+_LOCAL = pin.LOCAL
+
+
+def dynamics_rows(robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """``(A, c)`` with ``A chi = c`` the equations of motion ``M a + b = S^T tau + J^T f``."""
+    A = np.zeros((layout.nv, layout.n))
+    A[:, layout.a] = robot.M
+    A[:, layout.tau] = -robot.S.T
+    for c in layout.contacts:
+        J = robot.frame_jacobian(robot.frame_id(c.frame), _LOCAL)[: c.dim]
+        A[:, layout.f[c.frame]] = -J.T
+    return A, -robot.b
+
+
+def friction_rows(c: ContactSpec) -> tuple[np.ndarray, np.ndarray]:
+    """``(G, h)`` with ``G f_c <= h`` the friction and CoP polyhedron of contact ``c``."""
+    k = c.mu / math.sqrt(2.0)
+    rows = [
+        [0, 0, -1] + [0] * (c.dim - 3),
+        [1, 0, -k] + [0] * (c.dim - 3),
+        [-1, 0, -k] + [0] * (c.dim - 3),
+        [0, 1, -k] + [0] * (c.dim - 3),
+        [0, -1, -k] + [0] * (c.dim - 3),
+    ]
+    h = [-c.fmin, 0, 0, 0, 0]
+    if c.dim == 6:
+        ox, oy = c.offset
+        X, Y = c.length / 2, c.width / 2
+        # (ox - X) fz <= -ty <= (ox + X) fz ; (oy - Y) fz <= tx <= (oy + Y) fz
+        rows += [
+            [0, 0, -(ox + X), 0, -1, 0],
+            [0, 0, ox - X, 0, 1, 0],
+            [0, 0, -(oy + Y), 1, 0, 0],
+            [0, 0, oy - Y, -1, 0, 0],
+            [0, 0, -c.mu * min(X, Y), 0, 0, 1],
+            [0, 0, -c.mu * min(X, Y), 0, 0, -1],
+        ]
+        h += [0] * 6
+    return np.array(rows, dtype=float), np.array(h, dtype=float)
+
+
+class Constraint(Activatable):
+    """Base class: ``rows(robot, layout, dt) -> (C, lb, ub)``."""
+
+    def bind(self, robot: RobotModel, layout: Layout) -> None:
+        """Check the constraint against a model and layout."""
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+
+def _bounds(
+    name: str, what: str, lower: object, upper: object, size: int
+) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.asarray(lower, dtype=float)
+    hi = np.asarray(upper, dtype=float)
+    if lo.shape != (size,) or hi.shape != (size,):
+        raise SotpyError(
+            f"{name}: {what} bounds must have size {size}, got {lo.shape} and {hi.shape}"
+        )
+    if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+        raise SotpyError(f"{name}: {what} bounds must be ordered numbers (lower <= upper)")
+    return lo.copy(), hi.copy()
+
+
+def _keep(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return (np.abs(lo) < _NO_LIMIT) | (np.abs(hi) < _NO_LIMIT)
+
+
+def _clip(x: np.ndarray) -> np.ndarray:
+    """Entries of magnitude >= 1e30 (no limit) become infinite."""
+    return np.where(np.abs(x) >= _NO_LIMIT, np.sign(x) * np.inf, x)
+
+
+class JointTorqueLimit(Constraint):
+    """``tau_min <= tau <= tau_max`` (default: the model's effort limits)."""
+
+    def __init__(
+        self, name: str, robot: RobotModel, lower: object = None, upper: object = None
+    ) -> None:
+        super().__init__(name)
+        eff = robot.model.effortLimit[robot.actuated]
+        self.lower, self.upper = _bounds(
+            name,
+            "torque",
+            -eff if lower is None else lower,
+            eff if upper is None else upper,
+            robot.na,
+        )
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        keep = np.flatnonzero(_keep(self.lower, self.upper))
+        C = np.zeros((len(keep), layout.n))
+        C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
+        return C, _clip(self.lower[keep]), _clip(self.upper[keep])
+
+
+class JointAccelerationLimit(Constraint):
+    """``a_min <= S a <= a_max`` (rad/s^2)."""
+
+    def __init__(self, name: str, robot: RobotModel, lower: object, upper: object) -> None:
+        super().__init__(name)
+        self.lower, self.upper = _bounds(name, "acceleration", lower, upper, robot.na)
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        keep = np.flatnonzero(_keep(self.lower, self.upper))
+        C = np.zeros((len(keep), layout.n))
+        C[np.arange(len(keep)), robot.actuated[keep]] = 1.0
+        return C, _clip(self.lower[keep]), _clip(self.upper[keep])
+
+
+def _horizon(name: str, h: float) -> float:
+    h = float(h)
+    if not (math.isfinite(h) and h > 0):
+        raise SotpyError(f"{name}: the horizon must be finite and > 0 (s), got {h}")
+    return h
+
+
+class JointVelocityLimit(Constraint):
+    """``v_min <= v + h a <= v_max`` over the actuated joints (default: model limits)."""
+
+    def __init__(
+        self,
+        name: str,
+        robot: RobotModel,
+        horizon: float,
+        lower: object = None,
+        upper: object = None,
+    ) -> None:
+        super().__init__(name)
+        self.horizon = _horizon(name, horizon)
+        vl = robot.model.velocityLimit[robot.actuated]
+        self.lower, self.upper = _bounds(
+            name,
+            "velocity",
+            -vl if lower is None else lower,
+            vl if upper is None else upper,
+            robot.na,
+        )
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        keep = np.flatnonzero(_keep(self.lower, self.upper))
+        iv = robot.actuated[keep]
+        h = self.horizon
+        C = np.zeros((len(keep), layout.n))
+        C[np.arange(len(keep)), iv] = h
+        v = robot.v[iv]
+        return C, _clip(self.lower[keep]) - v, _clip(self.upper[keep]) - v
+
+
+class JointPositionLimit(Constraint):
+    """``q_min <= q + h v + h^2/2 a <= q_max`` for the one-dimensional joints."""
+
+    def __init__(self, name: str, robot: RobotModel, horizon: float) -> None:
+        super().__init__(name)
+        self.horizon = _horizon(name, horizon)
+        lo = robot.model.lowerPositionLimit[robot.iq1]
+        hi = robot.model.upperPositionLimit[robot.iq1]
+        keep = (np.abs(lo) < _NO_LIMIT) & (np.abs(hi) < _NO_LIMIT)
+        self.iq = robot.iq1[keep]
+        self.iv = robot.iv1[keep]
+        self.lower, self.upper = lo[keep], hi[keep]
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        h = self.horizon
+        m = len(self.iq)
+        C = np.zeros((m, layout.n))
+        C[np.arange(m), self.iv] = 0.5 * h * h
+        pred = robot.q[self.iq] + h * robot.v[self.iv]
+        return C, self.lower - pred, self.upper - pred
+
+
+class ContactConstraint(Constraint):
+    """The unilateral contacts of the layout: no contact acceleration, friction, CoP."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+
+    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        blocks, lbs, ubs = [], [], []
+        for c in layout.contacts:
+            fid = robot.frame_id(c.frame)
+            d = c.dim
+            C = np.zeros((d, layout.n))
+            C[:, layout.a] = robot.frame_jacobian(fid, _LOCAL)[:d]
+            drift = robot.frame_drift(fid, _LOCAL)[:d]
+            blocks.append(C)
+            lbs.append(-drift)
+            ubs.append(-drift)
+            G, hh = friction_rows(c)
+            C2 = np.zeros((len(hh), layout.n))
+            C2[:, layout.f[c.frame]] = G
+            blocks.append(C2)
+            lbs.append(np.full(len(hh), -np.inf))
+            ubs.append(hh)
+        if not blocks:
+            return np.zeros((0, layout.n)), np.zeros(0), np.zeros(0)
+        return np.vstack(blocks), np.concatenate(lbs), np.concatenate(ubs)

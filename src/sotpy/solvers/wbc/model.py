@@ -1,0 +1,184 @@
+r"""The robot quantities of one control tick, and the layout of the decision vector.
+
+Decision vector (``Layout``)::
+
+    chi = (a, tau, f_1, ..., f_p)
+
+* ``a`` (``nv``): the tangent acceleration (m/s^2, rad/s^2; for a free flyer, the base
+  linear then angular acceleration in the base frame, as Pinocchio's ``v``);
+* ``tau`` (``na``): the torques of the actuated joints (N m, N); ``S`` (``na x nv``)
+  selects the actuated velocities (``nv - 6`` last ones with a free flyer, all of them
+  for a fixed base);
+* ``f_c``: the wrench (6: force then torque, N and N m) or force (3, N) of contact
+  ``c``, applied by the environment on the contact frame, expressed in the contact
+  frame itself at its origin (**LOCAL**), so that its generalised force is
+  ``J_c^T f_c`` with ``J_c`` the LOCAL frame Jacobian (linear rows first; the first 3
+  rows for a point contact).
+
+``RobotModel.update(q, v)`` runs the Pinocchio passes of a tick once (kinematics with
+``v`` and zero acceleration for the drift terms, joint Jacobians, CRBA, nonlinear
+effects, gravity, CoM) and then answers:
+
+* ``M`` (nv x nv), ``b = C(q, v) v + g(q)`` (nv), ``g`` (nv): ``M a + b = S^T tau +
+  sum_c J_c^T f_c``;
+* ``frame_jacobian(fid, ref)`` and ``frame_drift(fid, ref)``: ``J`` and ``Jdot v`` of a
+  frame. For ``LOCAL_WORLD_ALIGNED`` (the Cartesian tasks) the drift is the *classical*
+  acceleration of the frame's origin and its angular acceleration, world axes, at zero
+  joint acceleration, so that ``d/dt (J v) = J a + drift`` where ``J v`` is the origin's
+  velocity and the angular velocity in world axes. For ``LOCAL`` (contacts) it is the
+  *spatial* acceleration in the frame (``pin.getFrameAcceleration``), the time
+  derivative of the LOCAL twist ``J v``: a contact held fixed (twist 0) needs
+  ``J a + drift = 0``;
+* ``com``, ``com_velocity``, ``Jcom`` (3 x nv, world), ``com_drift`` (``dJcom v``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ...errors import SotpyError
+
+__all__ = ["ContactSpec", "Layout", "RobotModel"]
+
+LWA = pin.LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class ContactSpec:
+    """A contact of the robot with the environment (unilateral, with friction).
+
+    Attributes:
+        frame: the Pinocchio frame of the contact; its z axis is the contact normal
+            (pointing out of the environment, into the robot's body).
+        dim: 6 (a surface contact: the wrench at the frame origin) or 3 (a point: force).
+        mu: friction coefficient (> 0); the cone is the inner pyramid
+            ``|f_x|, |f_y| <= mu / sqrt(2) f_z``.
+        length, width: the rectangle of a 6-D contact (m) in the frame's xy plane,
+            along x and y, centred at ``offset`` (m): the CoP must stay inside.
+        fmin: minimum normal force (N, >= 0).
+    """
+
+    frame: str
+    dim: int = 6
+    mu: float = 0.5
+    length: float = 0.1
+    width: float = 0.1
+    offset: tuple[float, float] = (0.0, 0.0)
+    fmin: float = 0.0
+
+
+class Layout:
+    """Where each block of ``chi = (a, tau, f_1..f_p)`` lives."""
+
+    def __init__(self, nv: int, na: int, contacts: list[ContactSpec]) -> None:
+        self.nv = nv
+        self.na = na
+        self.contacts = list(contacts)
+        self.a = slice(0, nv)
+        self.tau = slice(nv, nv + na)
+        self.f: dict[str, slice] = {}
+        i = nv + na
+        for c in self.contacts:
+            self.f[c.frame] = slice(i, i + c.dim)
+            i += c.dim
+        self.nf = i - nv - na
+        self.n = i
+
+    def __repr__(self) -> str:
+        return f"Layout(nv={self.nv}, na={self.na}, contacts={[c.frame for c in self.contacts]})"
+
+
+class RobotModel:
+    """A Pinocchio model and its data, updated once per tick at ``(q, v)``.
+
+    Actuated joints: every joint but a free-flyer root (``S = [0 | I]``); a model whose
+    root is a free flyer has ``na = nv - 6``, a fixed-base model ``na = nv``.
+    """
+
+    def __init__(self, model: pin.Model) -> None:
+        self.model = model
+        self.data = pin.Data(model)
+        self.nq, self.nv = model.nq, model.nv
+        root = model.joints[1] if model.njoints > 1 else None
+        self.free_flyer = bool(root is not None and root.shortname() == "JointModelFreeFlyer")
+        self.actuated = np.arange(6 if self.free_flyer else 0, self.nv)
+        self.na = len(self.actuated)
+        self.S = np.zeros((self.na, self.nv))
+        self.S[np.arange(self.na), self.actuated] = 1.0
+        self._a0 = np.zeros(self.nv)
+        self.q: np.ndarray | None = None
+        self.v: np.ndarray | None = None
+        # joint position coordinates of the actuated one-dimensional joints
+        iq, iv = [], []
+        for j in range(1, model.njoints):
+            jm = model.joints[j]
+            if jm.nq == 1 and jm.nv == 1:
+                iq.append(jm.idx_q)
+                iv.append(jm.idx_v)
+        self.iq1 = np.array(iq, dtype=int)
+        self.iv1 = np.array(iv, dtype=int)
+
+    def frame_id(self, frame: str, who: str = "RobotModel") -> int:
+        """The id of ``frame``; raises SotpyError naming ``who`` if it does not exist."""
+        if not self.model.existFrame(frame):
+            raise SotpyError(f"{who}: the model has no frame named {frame!r}")
+        return int(self.model.getFrameId(frame))
+
+    def update(self, q: np.ndarray, v: np.ndarray) -> None:
+        """Run the Pinocchio passes at ``(q, v)`` (sizes nq, nv, finite)."""
+        q = np.asarray(q, dtype=float)
+        v = np.asarray(v, dtype=float)
+        if q.shape != (self.nq,) or v.shape != (self.nv,):
+            raise SotpyError(
+                f"RobotModel.update: expected q of size {self.nq} and v of size {self.nv},"
+                f" got {q.shape} and {v.shape}"
+            )
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+            raise SotpyError("RobotModel.update: q or v is not finite")
+        m, d = self.model, self.data
+        pin.computeAllTerms(m, d, q, v)  # M (upper), nle, joint Jacobians, com, Jcom
+        pin.forwardKinematics(m, d, q, v, self._a0)  # data.v, data.a at a = 0: drifts
+        pin.updateFramePlacements(m, d)
+        pin.computeGeneralizedGravity(m, d, q)
+        pin.centerOfMass(m, d, q, v, self._a0, False)  # vcom, acom (a = 0: dJcom v)
+        M = d.M
+        self.M = np.triu(M) + np.triu(M, 1).T
+        self.b = d.nle.copy()
+        self.g = d.g.copy()
+        self.q = q.copy()
+        self.v = v.copy()
+
+    # -- frames -------------------------------------------------------------------------
+    def frame_placement(self, fid: int) -> pin.SE3:
+        return pin.SE3(self.data.oMf[fid])
+
+    def frame_jacobian(self, fid: int, ref: pin.ReferenceFrame = LWA) -> np.ndarray:
+        return pin.getFrameJacobian(self.model, self.data, fid, ref)
+
+    def frame_velocity(self, fid: int, ref: pin.ReferenceFrame = LWA) -> np.ndarray:
+        return pin.getFrameVelocity(self.model, self.data, fid, ref).vector.copy()
+
+    def frame_drift(self, fid: int, ref: pin.ReferenceFrame = LWA) -> np.ndarray:
+        if ref == LWA:
+            return pin.getFrameClassicalAcceleration(self.model, self.data, fid, LWA).vector.copy()
+        return pin.getFrameAcceleration(self.model, self.data, fid, ref).vector.copy()
+
+    # -- centre of mass -----------------------------------------------------------------
+    @property
+    def com(self) -> np.ndarray:
+        return self.data.com[0].copy()
+
+    @property
+    def com_velocity(self) -> np.ndarray:
+        return self.data.vcom[0].copy()
+
+    @property
+    def Jcom(self) -> np.ndarray:
+        return self.data.Jcom.copy()
+
+    @property
+    def com_drift(self) -> np.ndarray:
+        return self.data.acom[0].copy()
