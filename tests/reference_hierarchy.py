@@ -34,22 +34,24 @@ def level_residuals(levels, x: np.ndarray) -> np.ndarray:
 
 
 def projector_hierarchy(
-    levels, damping: float = 0.0, rank_tol: float = 1e-9
+    levels, damping=0.0, rank_tol: float = 1e-9
 ) -> tuple[np.ndarray, list[float]]:
     """Equality-only hierarchy by n x n projectors and SVD.
 
     ``levels`` is a list of ``(A, b)``. Level k: ``M = A_k P``; singular values below
     ``rank_tol * ||A_k||_F`` are dropped;
     ``x += M^# (b_k - A_k x)`` with ``M^# = V diag(s / (s^2 + damping^2)) U^T`` over the
-    kept singular values; ``P -= V V^T`` (kept right singular vectors). Returns ``x``
-    and the optimal residual norm of each level, ``||A_k x_k - b_k||`` right after
-    level ``k`` (the lexicographic optimum of level ``k``).
+    kept singular values; ``P -= V V^T`` (kept right singular vectors). ``damping`` is
+    one number or one per level. Returns ``x`` and the optimal residual norm of each
+    level, ``||A_k x_k - b_k||`` right after level ``k`` (the lexicographic optimum of
+    level ``k``).
     """
     n = levels[0][0].shape[1]
     x = np.zeros(n)
     P = np.eye(n)
     optimal = []
-    for A, b in levels:
+    dampings = np.broadcast_to(np.asarray(damping, dtype=float), (len(levels),))
+    for (A, b), damping in zip(levels, dampings, strict=True):
         M = A @ P
         if M.size == 0:
             optimal.append(0.0)
@@ -110,7 +112,7 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
 
     Returns ``(x, optimal)``: the minimum-norm point of the final optimal set and the
     optimal violation norm of each level over the optimal set of the levels above.
-    With ``damping`` (lambda), level ``k`` minimises ``||w||^2 + lambda^2 ||x - x_{k-1}||^2``
+    With ``damping`` (lambda, one number or one per level), level ``k`` minimises ``||w||^2 + lambda^2 ||x - x_{k-1}||^2``
     (``x_{k-1}`` the previous level's solution, ``x_0 = 0``) and its optimal set is the
     set of the levels above with the level's rows pinned as at its solution.
     A frozen row violated at its level's optimum (equality rows included) becomes the
@@ -118,6 +120,7 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
     ``margin`` (so that the next QP stays feasible despite the solver's tolerance).
     """
     n = levels[0][0].shape[1]
+    dampings = np.broadcast_to(np.asarray(damping, dtype=float), (len(levels),))
     E = np.zeros((0, n))
     f = np.zeros(0)
     C = np.zeros((0, n))
@@ -126,7 +129,7 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
     optimal = []
     big = np.inf
     x_prev = np.zeros(n)
-    for A, lo, up in levels:
+    for (A, lo, up), damping in zip(levels, dampings, strict=True):
         m = A.shape[0]
         # variables v = (x, w): min 1/2 ||w||^2 + 1/2 lambda^2 ||x - x_prev||^2
         # (lambda = 0: a negligible 1e-12 ||x||^2 instead)

@@ -483,3 +483,45 @@ def test_benchmark_script_runs():
     eq = bench.EqualityStack().levels(3)
     x_ref, _ = projector_hierarchy(eq)
     np.testing.assert_allclose(HierarchySolver().solve(eq).x, x_ref, atol=1e-9 * scaled(x_ref))
+
+
+# ------------------------------------------------------------ per-level damping
+@pytest.mark.parametrize("seed", range(6))
+def test_per_level_damping_matches_the_references(seed):
+    """One damping per level (0 for the first ones, as the SOT does for hard levels):
+    equality stacks against the projector reference, mixed stacks against the cascade."""
+    rng = np.random.default_rng(1000 + seed)
+    levels = equality_stack(rng)
+    lams = [0.0, 0.0] + list(rng.uniform(0.0, 0.3, len(levels) - 2))
+    x_ref, optimal = projector_hierarchy(levels, damping=lams)
+    res = solve_hierarchy(levels, damping=lams)
+    assert np.abs(res.x - x_ref).max() <= 1e-9 * scaled(x_ref)
+    np.testing.assert_allclose(res.residuals, optimal, rtol=1e-9, atol=1e-9 * scaled(x_ref))
+    mixed = mixed_stack(rng)
+    lams = [0.0] + list(rng.uniform(0.05, 0.3, len(mixed) - 1))
+    x_ref, optimal = cascade_hierarchy(mixed, damping=lams)
+    solver = HierarchySolver()
+    for _ in range(2):  # the second call with the first one's warm starts and blocks
+        _check_against_cascade(mixed, solver.solve(mixed, damping=lams), x_ref, optimal)
+
+
+def test_undamped_first_level_keeps_its_exact_answer():
+    """Damping the lower levels only leaves the first level exactly met (a damped first
+    level would not be)."""
+    rng = np.random.default_rng(77)
+    A1, b1 = rng.standard_normal((3, 6)), rng.standard_normal(3)
+    A2, b2 = rng.standard_normal((6, 6)), rng.standard_normal(6)
+    res = solve_hierarchy([(A1, b1), (A2, b2)], damping=[0.0, 0.5])
+    assert np.abs(A1 @ res.x - b1).max() < 1e-12
+    damped_all = solve_hierarchy([(A1, b1), (A2, b2)], damping=0.5)
+    assert np.abs(A1 @ damped_all.x - b1).max() > 1e-3
+
+
+def test_bad_dampings_are_refused():
+    levels = [(np.eye(2), np.ones(2)), (np.ones((1, 2)), np.ones(1))]
+    with pytest.raises(SolverError, match="3 dampings for 2 levels"):
+        solve_hierarchy(levels, damping=[0.0, 0.1, 0.2])
+    with pytest.raises(SolverError, match="damping must be finite and >= 0"):
+        solve_hierarchy(levels, damping=[0.0, -0.1])
+    with pytest.raises(SolverError, match="one number per level"):
+        solve_hierarchy(levels, damping="lots")

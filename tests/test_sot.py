@@ -330,3 +330,58 @@ def test_active_joint_limits_solved_without_qp_on_talos(talos):
     v = A0 @ res.x
     assert ((v >= lo - 1e-9) & (v <= up + 1e-9)).all()
     assert (np.abs(v - up) < 1e-12).any()  # a bound is indeed active
+
+
+def test_task_damping_damps_only_that_level(talos):
+    """setTaskDamping: the first task stays exact, the second is damped least squares in
+    the first one's null space (the projector formula with lambda on level 2 only)."""
+    rng = np.random.default_rng(4)
+    nv = talos.model.nv
+    J1, e1 = rng.standard_normal((6, nv)), rng.standard_normal(6)
+    J2, e2 = rng.standard_normal((8, nv)), rng.standard_normal(8)
+    sot = SOT("sot", talos.dynamic)
+    sot.setJointLimits(False)
+    t1, t2 = generic_task("t1", J1, e1), generic_task("t2", J2, e2)
+    sot.push(t1)
+    sot.push(t2)
+    lam = 0.3
+    sot.setTaskDamping(t2, lam)
+    assert sot.getTaskDamping(t2) == lam and sot.getTaskDamping(t1) == 0.0
+    qdot = sot.control.value
+    b1, b2 = -e1, -e2
+    x1 = np.linalg.pinv(J1) @ b1
+    P = np.eye(nv) - np.linalg.pinv(J1) @ J1
+    M = J2 @ P
+    expected = x1 + M.T @ np.linalg.solve(M @ M.T + lam**2 * np.eye(8), b2 - J2 @ x1)
+    np.testing.assert_allclose(qdot, expected, atol=1e-9)
+    np.testing.assert_allclose(J1 @ qdot, b1, atol=1e-10)  # level 1 exact
+    sot.unsetTaskDamping(t2)
+    undamped = sot.control.value
+    assert np.linalg.norm(undamped - expected) > 1e-3
+    with pytest.raises(SotpyError, match="must be finite and >= 0"):
+        sot.setTaskDamping(t2, -1.0)
+    with pytest.raises(SignalTypeError, match="NaN"):  # refused by the signal type
+        sot.damping.value = float("nan")
+    sot.damping.value = -0.1
+    with pytest.raises(SignalTypeError, match=r"damping: expected a finite damping >= 0"):
+        sot.control.value  # noqa: B018
+
+
+def test_joint_limit_level_is_never_damped(talos):
+    """A joint beyond its limit: the joint-limit level asks qdot_j >= (ql - q) / dt > 0
+    (0 outside the box). Damped, the level would not be met; the SOT keeps it exact."""
+    model = talos.model
+    j = model.getJointId("arm_right_4_joint")
+    iq, iv = model.joints[j].idx_q, model.joints[j].idx_v
+    q = talos.halfSitting.copy()
+    q[iq] = model.lowerPositionLimit[iq] - 0.001  # 1 mrad below the lower limit
+    talos.device.set(q)
+    sot = SOT("sot", talos.dynamic)
+    sot.dt.value = 0.01
+    sot.damping.value = 0.5
+    row = np.zeros((1, model.nv))
+    row[0, iv + 1] = 1.0
+    sot.push(generic_task("other", row, np.array([0.1])))
+    qdot = sot.control.value
+    assert qdot[iv] >= 0.001 / 0.01 - 1e-9  # back inside within one period
+    assert sot.lastResult.feasible

@@ -186,7 +186,8 @@ def reach_options(parser: argparse.ArgumentParser, robot: str) -> None:
         type=non_negative_float,
         default=0.0,
         metavar="L",
-        help="the SOT's damping, for targets out of reach (default 0: exact levels)",
+        help="damping of the wrist and posture levels, for targets out of reach "
+        "(default 0: exact; the feet, CoM and joint limits stay exact)",
     )
 
 

@@ -233,7 +233,8 @@ def run_reach(
         wrist_gain: ``(g0, ginf, xref, p)`` of the wrist's ``GainAdaptive.setByPoint``.
         posture_gain: the posture task's gain (1/s).
         contact_gain: ``controlGain`` k of the level-1 task, in (0, 1].
-        damping: the SOT's ``damping`` (0: exact levels).
+        damping: the damping of the wrist and posture levels (``SOT.setTaskDamping``;
+            0: exact). The feet, the CoM and the joint limits stay exact.
         sleep: the function that waits when paced (``time.sleep``).
 
     Returns:
@@ -335,9 +336,10 @@ def run_reach(
 
     sot = SOT(f"{prefix}_sot", dyn)
     sot.dt.value = dt
-    sot.damping.value = damping
     for task in (contact, wrist.task, posture.task):
         sot.push(task)
+    for task in (wrist.task, posture.task):  # the feet and the CoM stay exact
+        sot.setTaskDamping(task, damping)
     plug(sot.control, device.control)
     for m in r.tasks.created().values():
         entities += [e.name for e in m.entities()]

@@ -20,11 +20,9 @@ lower bound, ``-1`` at the upper). Releasing ``j`` means moving along a directio
 ``d`` with ``d_j = s_j``, ``d_i = 0`` for the other fixed variables and
 ``A_i d = 0`` for every level ``i`` above the current one (it keeps their optimal
 fitted values, which define the optimal sets). At level ``k`` the first-order change
-of the level's objective ``1/2 ||A_k x - b_k||^2 (+ 1/2 lambda^2 ||x - x_{k-1}||^2)``
-along ``d`` is
+of the level's objective ``1/2 ||A_k x - b_k||^2`` along ``d`` is
 
-.. math:: \delta_j = r_k^T A_k d \;(+ \lambda^2 (x_k - x_{k-1})^T d),
-   \qquad r_k = A_k x - b_k,
+.. math:: \delta_j = r_k^T A_k d, \qquad r_k = A_k x - b_k,
 
 the multiplier of the bound at level ``k`` (``d`` is defined up to directions the level
 is already optimal along, which do not change ``\delta``). The first level with
@@ -156,7 +154,6 @@ class DualCheck:
         basis: np.ndarray,
         rank: int,
         qr: tuple[np.ndarray, np.ndarray] | None,
-        damp_step: np.ndarray | None,
     ) -> None:
         """Judge the undecided bounds at a level (augmented rows ``[A | -b]``, solved),
         then carry their directions into the level's null space.
@@ -174,14 +171,11 @@ class DualCheck:
         T = A @ D
         tf = T.ravel()
         tt = float(tf @ tf)
-        if tt == 0.0 and damp_step is None:
+        if tt == 0.0:
             return  # the level does not see these variables: nothing to judge or carry
         r = rows @ x_aug  # A x - b
         delta = r @ T
         tol = DUAL_TOL * (1.0 + math.sqrt(float(r @ r) * tt))
-        if damp_step is not None:
-            delta += damp_step @ D
-            tol += DUAL_TOL * math.sqrt(float(damp_step @ damp_step))
         if delta.min() < -tol:
             self._fail(delta, tol)
             return

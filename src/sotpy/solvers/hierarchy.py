@@ -285,29 +285,29 @@ class HierarchySolver:
         self._stepper = None
         self._structure = None
 
-    def solve(self, levels, damping: float | None = None) -> HierarchyResult:
+    def solve(self, levels, damping=None) -> HierarchyResult:
         """Solve the stack ``levels`` (highest priority first).
 
         Each level is ``(A, lower, upper)`` or ``(A, b)`` (shorthand for
         ``lower = upper = b``), with ``A`` of shape ``(m_k, n)``. ``damping`` overrides
-        the solver's default for this call. Raises :class:`SolverError` on malformed
-        input, naming the level and row.
+        the solver's default for this call: one number for every level, or one per
+        level (e.g. 0 for hard levels, a small value for tasks that may be out of
+        reach). Raises :class:`SolverError` on malformed input, naming the level and
+        row.
         """
         if damping is None:
-            lam = self.damping
-        else:
-            lam = float(damping)
-            _check_damping(lam)
+            damping = self.damping
         st, parsed = self._prepare(levels)
+        lams = _dampings(damping, len(st.sizes))
         stepper = self._stepper
         if stepper is None or stepper.m_max < st.m_max:
             stepper = self._stepper = NullspaceStepper(self.n, st.m_max)
         else:
             stepper.reset()
         if st.all_eq:
-            ranks = self._solve_equality(st, stepper, lam)
+            ranks = self._solve_equality(st, stepper, lams)
             return self._result(st, parsed, stepper.x_aug, ranks, "equality", (), 0, True)
-        return self._solve_general(st, parsed, stepper, lam)
+        return self._solve_general(st, parsed, stepper, lams)
 
     # ------------------------------------------------------------ input handling
     def _prepare(self, levels):
@@ -472,9 +472,11 @@ class HierarchySolver:
         st.hi_adj = np.empty(len(in_idx))
 
     # -------------------------------------------------------------- equality path
-    def _solve_equality(self, st: _Structure, stepper: NullspaceStepper, lam: float) -> np.ndarray:
-        """All rows are equalities: the null-space recursion, levels known to be of full
-        row rank (from the previous call) factored together when undamped."""
+    def _solve_equality(
+        self, st: _Structure, stepper: NullspaceStepper, lams: list[float]
+    ) -> np.ndarray:
+        """All rows are equalities: the null-space recursion, undamped levels known to be
+        of full row rank (from the previous call) factored together."""
         sizes, slices, A_st = st.sizes, st.slices, st.A
         ranks = np.zeros(len(sizes), dtype=np.intp)
         fro = self._fro
@@ -486,9 +488,9 @@ class HierarchySolver:
                 break
             need = k1 - 1 != last
             if k1 - k0 == 1:
-                ranks[k0] = step(A_st[slices[k0]], fro[k0], tol, lam, need)
+                ranks[k0] = step(A_st[slices[k0]], fro[k0], tol, lams[k0], need)
                 continue
-            if lam == 0.0:
+            if not any(lams[k0:k1]):
                 rows = A_st[st.starts[k0] : st.starts[k1]]
                 if step(rows, fro[k0:k1].min(), tol, 0.0, need, True) >= 0:
                     ranks[k0:k1] = sizes[k0:k1]
@@ -496,9 +498,10 @@ class HierarchySolver:
             for k in range(k0, k1):
                 if stepper.nf == 0:
                     break
-                ranks[k] = step(A_st[slices[k]], fro[k], tol, lam, k != last)
-        if lam == 0.0:
-            st.blocks = _plan_blocks(sizes, ranks)
+                ranks[k] = step(A_st[slices[k]], fro[k], tol, lams[k], k != last)
+        # damped levels are never merged (the merge is exact only undamped)
+        undamped = [r if lam == 0.0 else -1 for r, lam in zip(ranks, lams, strict=True)]
+        st.blocks = _plan_blocks(sizes, undamped)
         return ranks
 
     # --------------------------------------------------------------- general path
@@ -507,7 +510,7 @@ class HierarchySolver:
         st: _Structure,
         parsed,
         stepper: NullspaceStepper,
-        lam: float,
+        lams: list[float],
     ) -> HierarchyResult:
         """Level by level: equality step + check (shortcut), else a QP; then the
         minimum-norm point."""
@@ -524,12 +527,12 @@ class HierarchySolver:
         np.copyto(lo_adj, st.loin)
         np.copyto(hi_adj, st.upin)
         box = None
-        if self.shortcut and self.active_set and lam == 0.0:
+        if self.shortcut and self.active_set and not any(lams):
             # undamped only: damped, each level's point depends on the path (x_{k-1}),
             # and a bound may be active at one level and not at another
             box = self._box(st)
             if box is not None:
-                result = self._solve_box(st, parsed, stepper, lam, box)
+                result = self._solve_box(st, parsed, stepper, box)
                 if result is not None:
                     return result
                 stepper.reset()
@@ -541,7 +544,7 @@ class HierarchySolver:
             last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
             for k, (e0, e1, _, _) in enumerate(st.eq_bounds):
                 if e1 > e0 and stepper.nf > 0:
-                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lam, k != last)
+                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lams[k], k != last)
             v = Ain @ x_aug
             if (v >= lo_adj - eps).all() and (v <= hi_adj + eps).all():
                 return self._result(st, parsed, x_aug, ranks, "shortcut", (), 0, True)
@@ -556,18 +559,18 @@ class HierarchySolver:
             if i1 == 0:
                 # no inequality row so far: plain equality step
                 if e1 > e0:
-                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lam)
+                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lams[k])
                 continue
             if self.shortcut and k not in st.active:
                 saved = _save(stepper)
-                r = stepper.step(Aeq[e0:e1], fro[k], tol, lam) if e1 > e0 else 0
+                r = stepper.step(Aeq[e0:e1], fro[k], tol, lams[k]) if e1 > e0 else 0
                 v = Ain[:i1] @ x_aug
                 if (v >= lo_adj[:i1] - eps).all() and (v <= hi_adj[:i1] + eps).all():
                     ranks[k] = r
                     _widen(st, i1, v)  # the rows' intervals contain the current point
                     continue
                 _restore(stepper, saved)
-            ranks[k], its, ok = self._qp_level(st, stepper, k, lam)
+            ranks[k], its, ok = self._qp_level(st, stepper, k, lams[k])
             qp_levels.append(k)
             iterations += its
             converged = converged and ok
@@ -597,7 +600,7 @@ class HierarchySolver:
         return box
 
     def _solve_box(
-        self, st: _Structure, parsed, stepper: NullspaceStepper, lam: float, box: BoxActiveSet
+        self, st: _Structure, parsed, stepper: NullspaceStepper, box: BoxActiveSet
     ) -> HierarchyResult | None:
         """Fix the guessed active bounds, solve the equality rows below, verify (primal
         and lexicographic dual); a few corrections; None if still not verified."""
@@ -608,7 +611,7 @@ class HierarchySolver:
             W, values, s = box.fixed()
             stepper.fix(W, values)
             dual = DualCheck(n, W, s) if len(W) else None
-            ranks = self._box_steps(st, stepper, lam, dual)
+            ranks = self._box_steps(st, stepper, dual)
             x = stepper.x
             low = x < box.lo - eps
             high = x > box.hi + eps
@@ -634,11 +637,11 @@ class HierarchySolver:
         return None
 
     def _box_steps(
-        self, st: _Structure, stepper: NullspaceStepper, lam: float, dual: DualCheck | None
+        self, st: _Structure, stepper: NullspaceStepper, dual: DualCheck | None
     ) -> np.ndarray:
-        """The equality rows of levels 1.. (the fixed variables held), levels found of
-        full row rank at the previous call factored together when undamped; the dual
-        check run on each block."""
+        """The equality rows of levels 1.. (the fixed variables held; undamped), levels
+        found of full row rank at the previous call factored together; the dual check
+        run on each block."""
         eb = st.eq_bounds
         ranks = np.zeros(len(st.sizes), dtype=np.intp)
         levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
@@ -647,7 +650,7 @@ class HierarchySolver:
                 dual.finish(stepper.x)
             return ranks
         blocks = st.box_blocks
-        if blocks is None or lam != 0.0:
+        if blocks is None:
             blocks = [[k] for k in levels]
         last = levels[-1]
         Aeq, fro, tol, n = st.Aeq, self._fro, self.rank_tol, self.n
@@ -657,18 +660,16 @@ class HierarchySolver:
             rows = Aeq[eb[ks[0]][0] : eb[ks[-1]][1]]
             c0 = stepper.c0
             judge = dual is not None and dual.pending
-            xprev = stepper.x.copy() if judge and lam > 0.0 else None
             if merged:
                 r = step(rows, min(fro[k] for k in ks), tol, 0.0, ks[-1] != last, True)
                 if r < 0:
                     return r
             else:
-                r = step(rows, fro[ks[0]], tol, lam, ks[-1] != last)
+                r = step(rows, fro[ks[0]], tol, 0.0, ks[-1] != last)
             if judge:
-                damp = None if xprev is None else (lam * lam) * (stepper.x - xprev)
                 # Y = the first r columns of the basis when the step formed it
                 rank = r if ks[-1] != last else -1
-                dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr, damp)
+                dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr)
             return r
 
         for ks in blocks:
@@ -678,9 +679,8 @@ class HierarchySolver:
                 continue
             for k in ks:
                 ranks[k] = one([k], False)
-        if lam == 0.0:
-            full = [ranks[k] == eb[k][1] - eb[k][0] for k in levels]
-            st.box_blocks = _merge_runs(levels, full)
+        full = [ranks[k] == eb[k][1] - eb[k][0] for k in levels]
+        st.box_blocks = _merge_runs(levels, full)
         return ranks
 
     def _qp_level(
@@ -866,7 +866,7 @@ class HierarchySolver:
 
 def solve_hierarchy(
     levels,
-    damping: float = 0.0,
+    damping=0.0,
     *,
     rank_tol: float = 1e-9,
     eps: float = 1e-9,
@@ -875,13 +875,12 @@ def solve_hierarchy(
 ) -> HierarchyResult:
     """Solve a stack of levels once (a thin wrapper over a fresh :class:`HierarchySolver`).
 
-    ``levels``: list of ``(A, lower, upper)`` or ``(A, b)``, highest priority first.
-    Returns a :class:`HierarchyResult`; the solution is ``result.x``.
+    ``levels``: list of ``(A, lower, upper)`` or ``(A, b)``, highest priority first;
+    ``damping``: one number for every level or one per level. Returns a
+    :class:`HierarchyResult`; the solution is ``result.x``.
     """
-    solver = HierarchySolver(
-        damping=damping, rank_tol=rank_tol, eps=eps, backend=backend, shortcut=shortcut
-    )
-    return solver.solve(levels)
+    solver = HierarchySolver(rank_tol=rank_tol, eps=eps, backend=backend, shortcut=shortcut)
+    return solver.solve(levels, damping)
 
 
 # ------------------------------------------------------------------- helpers
@@ -949,6 +948,27 @@ def _restore(stepper: NullspaceStepper, saved) -> None:
         stepper.identity = False
     stepper.x[:] = x
     stepper.moved = moved
+
+
+def _dampings(damping, p: int) -> list[float]:
+    """The damping of each of the ``p`` levels, from one number or one per level."""
+    if isinstance(damping, (int, float, np.integer, np.floating)):
+        lam = float(damping)
+        _check_damping(lam)
+        return [lam] * p
+    try:
+        lams = [float(v) for v in damping]
+    except (TypeError, ValueError):
+        raise SolverError(
+            f"solve_hierarchy: damping must be a number or one number per level, got {damping!r}"
+        ) from None
+    if len(lams) != p:
+        raise SolverError(
+            f"solve_hierarchy: {len(lams)} dampings for {p} levels; expected one per level"
+        )
+    for lam in lams:
+        _check_damping(lam)
+    return lams
 
 
 def _check_damping(damping: float) -> None:

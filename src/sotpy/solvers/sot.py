@@ -22,9 +22,12 @@ twist in its own frame, then the joints) that solves, lexicographically (see
    (``task = -gain * error``), ``lower <= J qdot <= upper`` for an inequality task.
 
 The ``damping`` input (default 0) is the solver's damping :math:`\lambda` inside each
-level. Stack edits (``push``, ``remove``, ``up``, ``down``, ``clear``) change the
-dependencies of ``control``: they take effect at its next evaluation (the next tick of
-a running loop), and a refused edit leaves the stack as it was.
+task's level; ``setTaskDamping(task, lambda)`` sets a task's own (e.g. damp only a
+reaching task that may go out of reach, keep the feet exact). The joint-limit level is
+never damped (a hard level). Stack edits (``push``, ``remove``, ``up``, ``down``,
+``clear``) change the dependencies of ``control``: they take effect at its next
+evaluation (the next tick of a running loop), and a refused edit leaves the stack as it
+was.
 
 After each evaluation, ``lastResult`` holds the solver's
 :class:`~sotpy.solvers.hierarchy.HierarchyResult` (residual and rank of every level,
@@ -39,12 +42,13 @@ joint-limit level itself is always feasible: its bounds are clipped so that
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
 import numpy as np
 
-from ..errors import EntityError, SignalTypeError, SotpyError, SotpyWarning
+from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
 from ..graph import DOUBLE, VECTOR, Entity, Input, Output, command, plug
 from ..graph.pool import pool
 from ..tasks.task import TaskAbstract
@@ -83,6 +87,7 @@ class SOT(Entity):
         self.lastResult: Any = None
         self._warned = False
         self._limits: tuple[Any, ...] | None = None
+        self._taskDamping: dict[str, float] = {}
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
         for j in range(1, model.njoints):
@@ -182,6 +187,31 @@ class SOT(Entity):
         print("+-----------------")
 
     @command
+    def setTaskDamping(self, task: Any, damping: float) -> None:
+        """Damping of ``task``'s level (finite, >= 0), instead of the ``damping`` input."""
+        task = self._task(task, "setTaskDamping")
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise CommandError(
+                f"SOT({self.name}).setTaskDamping: the damping of {task.name} must be "
+                f"finite and >= 0, got {damping}"
+            )
+        self._taskDamping[task.name] = float(damping)
+        self.control.setReady()
+
+    @command
+    def unsetTaskDamping(self, task: Any) -> None:
+        """``task``'s level follows the ``damping`` input again."""
+        task = self._task(task, "unsetTaskDamping")
+        self._taskDamping.pop(task.name, None)
+        self.control.setReady()
+
+    @command
+    def getTaskDamping(self, task: Any) -> float:
+        """The damping used for ``task``'s level now."""
+        task = self._task(task, "getTaskDamping")
+        return self._taskDamping.get(task.name, float(self.damping.value))
+
+    @command
     def setJointLimits(self, enabled: bool) -> None:
         """Keep (default) or drop the joint-limit level."""
         self._jointLimits = enabled
@@ -231,6 +261,10 @@ class SOT(Entity):
         nv = self.nv
         it = iter(values)
         damping = float(next(it))
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise SignalTypeError(
+                f"{self.damping.name}: expected a finite damping >= 0, got {damping}"
+            )
         levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         if self._jointLimits:
             levels.append(self._limitLevel(next(it), next(it), next(it), next(it), next(it)))
@@ -248,7 +282,11 @@ class SOT(Entity):
             levels.append((J, lower, upper))
         if not levels:
             return np.zeros(nv)
-        result = self._solver.solve(levels, damping=damping)
+        lams = [0.0] * (len(levels) - len(self._stack))  # the joint limits: hard
+        overrides = self._taskDamping
+        for task in self._stack:
+            lams.append(overrides.get(task.name, damping))
+        result = self._solver.solve(levels, damping=lams)
         self.lastResult = result
         hard = self._jointLimits or self._stack[0].isInequality
         if hard and not result.feasible:
