@@ -85,6 +85,7 @@ from sotpy.errors import SolverError
 from ._boxset import BoxActiveSet, DualCheck
 from ._cascade import DaqpQP, ProxQP, daqp_available
 from ._equality import NullspaceStepper
+from ._kkt import kkt_solve
 
 __all__ = [
     "HierarchyResult",
@@ -97,6 +98,8 @@ _F64 = np.dtype(np.float64)
 _BACKENDS = ("auto", "proxsuite", "daqp")
 #: primal-dual corrections of the box path's active set before falling back to QPs
 _BOX_ITERATIONS = 4
+_NO_INDEX = np.zeros(0, dtype=np.intp)
+_NO_VALUE = np.zeros(0)
 
 
 class HierarchyResult:
@@ -184,10 +187,12 @@ class _Structure:
         "blocks",
         "box",
         "box_blocks",
+        "box_full",
         "bufs",
         "d",
         "din",
         "eq_bounds",
+        "eq_full",
         "eq_idx",
         "hi_adj",
         "in_idx",
@@ -305,7 +310,11 @@ class HierarchySolver:
         else:
             stepper.reset()
         if st.all_eq:
-            ranks = self._solve_equality(st, stepper, lams)
+            ranks = None
+            if st.eq_full is not None and not any(lams):
+                ranks = self._kkt_equality(st, stepper)
+            if ranks is None:
+                ranks = self._solve_equality(st, stepper, lams)
             return self._result(st, parsed, stepper.x_aug, ranks, "equality", (), 0, True)
         return self._solve_general(st, parsed, stepper, lams)
 
@@ -434,6 +443,7 @@ class HierarchySolver:
         st.qps = {}
         st.warm = {}
         st.blocks = [(k, k + 1) for k in range(len(sizes)) if sizes[k] > 0]
+        st.eq_full = None
         self._structure = st
         return st
 
@@ -447,6 +457,7 @@ class HierarchySolver:
         st.shortcut_ok = True
         st.box = None
         st.box_blocks = None
+        st.box_full = None
         mtot = st.A.shape[0]
         eqm = np.ones(mtot, dtype=bool) if key is None else np.frombuffer(key, dtype=bool)
         st.all_eq = bool(eqm.all())
@@ -502,6 +513,44 @@ class HierarchySolver:
         # damped levels are never merged (the merge is exact only undamped)
         undamped = [r if lam == 0.0 else -1 for r, lam in zip(ranks, lams, strict=True)]
         st.blocks = _plan_blocks(sizes, undamped)
+        st.eq_full = [bool(ranks[k] == sizes[k]) for k in st.nonempty] or None
+        return ranks
+
+    def _kkt_equality(self, st: _Structure, stepper: NullspaceStepper) -> np.ndarray | None:
+        """The equality stack as one KKT solve when its shape allows (see :mod:`._kkt`):
+        every level but the last of full row rank at the previous call; None if not."""
+        levels = [int(k) for k in st.nonempty]
+        full = st.eq_full
+        if full is None or len(full) != len(levels):
+            return None
+        A = st.A
+        starts = st.starts
+        if all(full):
+            out = kkt_solve(A[starts[levels[0]] :], None, self.n, _NO_INDEX, _NO_VALUE)
+        elif all(full[:-1]):
+            k = levels[-1]
+            out = kkt_solve(
+                A[starts[levels[0]] : starts[k]], A[starts[k] :], self.n, _NO_INDEX, _NO_VALUE
+            )
+        else:
+            return None
+        if out is None:
+            return None
+        stepper.reset()
+        stepper.set_point(out[0])
+        return self._kkt_ranks(st.sizes, levels, full)
+
+    def _kkt_ranks(self, sizes, levels: list[int], full: list[bool]) -> np.ndarray:
+        """Ranks after a KKT solve: the rows of each full level; the last (least-squares)
+        level fixed every direction left."""
+        ranks = np.zeros(len(sizes), dtype=np.intp)
+        used = 0
+        for k, f in zip(levels, full, strict=True):
+            if f:
+                ranks[k] = sizes[k]
+                used += sizes[k]
+            else:
+                ranks[k] = self.n - used
         return ranks
 
     # --------------------------------------------------------------- general path
@@ -609,9 +658,13 @@ class HierarchySolver:
         i_lower = st.eq_bounds[0][3]  # inequality rows of the levels below level 0
         for _ in range(_BOX_ITERATIONS):
             W, values, s = box.fixed()
-            stepper.fix(W, values)
-            dual = DualCheck(n, W, s) if len(W) else None
-            ranks = self._box_steps(st, stepper, dual)
+            verdict = self._box_kkt(st, stepper, W, values, s)
+            if verdict is None:  # the shape does not allow one KKT solve: level by level
+                stepper.fix(W, values)
+                dual = DualCheck(n, W, s) if len(W) else None
+                ranks = self._box_steps(st, stepper, dual)
+            else:
+                ranks, dual = verdict
             x = stepper.x
             low = x < box.lo - eps
             high = x > box.hi + eps
@@ -635,6 +688,62 @@ class HierarchySolver:
             method = "active-set" if len(W) else "shortcut"
             return self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
         return None
+
+    def _box_kkt(
+        self,
+        st: _Structure,
+        stepper: NullspaceStepper,
+        W: np.ndarray,
+        values: np.ndarray,
+        s: np.ndarray,
+    ) -> tuple[np.ndarray, DualCheck | None] | None:
+        """The box path's solve as one KKT system (see :mod:`._kkt`) when the levels
+        below had the shape it needs at the previous call. Returns the ranks and the
+        dual verdict (a :class:`DualCheck` already decided, or None without bounds), or
+        None: not applicable, ill-conditioned, or a bound whose multiplier at the last
+        level is zero (then the minimum-norm criterion decides, level by level)."""
+        full = st.box_full
+        if full is None:
+            return None
+        eb = st.eq_bounds
+        levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
+        if len(full) != len(levels) or not levels:
+            return None
+        Aeq, n = st.Aeq, self.n
+        e0 = eb[levels[0]][0]
+        if all(full):
+            out = kkt_solve(Aeq[e0 : eb[levels[-1]][1]], None, n, W, values)
+        elif all(full[:-1]):
+            k = levels[-1]
+            out = kkt_solve(Aeq[e0 : eb[k][0]], Aeq[eb[k][0] : eb[k][1]], n, W, values)
+        else:
+            return None
+        if out is None:
+            return None
+        x, mu = out
+        dual = None
+        if len(W):
+            # releasing bound j changes the last objective at the rate -s_j mu_j
+            rate = -s * mu
+            scale = 1.0 + float(np.abs(mu).max())
+            tol = 1e-10 * scale
+            judged = s != 0.0
+            if (judged & (np.abs(rate) <= tol)).any():
+                return None  # a bound not pushed against: the minimum-norm rule decides
+            dual = DualCheck(n, W[:0], s[:0])  # nothing left undecided
+            bad = judged & (rate < -tol)
+            if bad.any():
+                dual.failed = True
+                dual.worst = int(np.argmin(np.where(judged, rate, np.inf)))
+        stepper.reset()
+        stepper.set_point(x)
+        sizes = [eb[k][1] - eb[k][0] for k in levels]
+        ranks = np.zeros(len(st.sizes), dtype=np.intp)
+        used = len(W)
+        for k, m, f in zip(levels, sizes, full, strict=True):
+            ranks[k] = m if f else n - used
+            used += m
+        return ranks, dual
 
     def _box_steps(
         self, st: _Structure, stepper: NullspaceStepper, dual: DualCheck | None
@@ -679,8 +788,9 @@ class HierarchySolver:
                 continue
             for k in ks:
                 ranks[k] = one([k], False)
-        full = [ranks[k] == eb[k][1] - eb[k][0] for k in levels]
+        full = [bool(ranks[k] == eb[k][1] - eb[k][0]) for k in levels]
         st.box_blocks = _merge_runs(levels, full)
+        st.box_full = full
         return ranks
 
     def _qp_level(
