@@ -200,8 +200,8 @@ def lqrGain(
 
 
 def isConverged(state: Any, thetaTol: float = 1e-3, thetaDotTol: float = 1e-2) -> bool:
-    """Whether the pendulum is upright and still: |theta| < ``thetaTol`` (rad) and
-    |theta_dot| < ``thetaDotTol`` (rad/s)."""
+    """Whether the pendulum is upright and still: ``|theta| < thetaTol`` (rad) and
+    ``|theta_dot| < thetaDotTol`` (rad/s)."""
     s = np.asarray(state, dtype=float)
     return bool(abs(s[1]) < thetaTol and abs(s[3]) < thetaDotTol)
 

@@ -62,20 +62,20 @@ internal output signal (its value is the tick at which it ran) that the public o
 depend on, as the SoT's internal signals; a pass runs at most once per tick, and only if
 an output that needs it is read:
 
-==================================  ==========================  ===========================
-pass signal                         Pinocchio                   read by
-==================================  ==========================  ===========================
-``kinematics`` (position)           computeJointJacobians,      every op point, and the
-                                    updateFramePlacements       ``centerOfMass`` pass
-``centerOfMass`` (kinematics)       jacobianCenterOfMass        ``com``, ``Jcom``
-``crba`` (position)                 crba                        ``inertia``
-``nonLinearEffects`` (pos., vel.)   nonLinearEffects            ``dynamicDrift``
-``generalizedGravity`` (position)   computeGeneralizedGravity   ``gravity``
-``centroidalMomentum`` (pos., vel.) computeCentroidalMomentum   ``momenta``,
-                                                                ``angularmomentum``
-``centroidalMomentumTimeVariation`` computeCentroidalMomentum-  ``zmp``
-(position, velocity, acceleration)  TimeVariation
-==================================  ==========================  ===========================
+===================================  ==========================  =======================
+pass signal                          Pinocchio                   read by
+===================================  ==========================  =======================
+``kinematics`` (position)            computeJointJacobians,      every op point, and the
+                                     updateFramePlacements       ``centerOfMass`` pass
+``centerOfMass`` (kinematics)        jacobianCenterOfMass        ``com``, ``Jcom``
+``crba`` (position)                  crba                        ``inertia``
+``nonLinearEffects`` (pos., vel.)    nonLinearEffects            ``dynamicDrift``
+``generalizedGravity`` (position)    computeGeneralizedGravity   ``gravity``
+``centroidalMomentum`` (pos., vel.)  computeCentroidalMomentum   ``momenta``,
+                                                                 ``angularmomentum``
+``centroidalMomentumTimeVariation``  computeCentroidalMomentum-  ``zmp``
+(position, velocity, acceleration)   TimeVariation
+===================================  ==========================  =======================
 
 Reading the six op points, ``com`` and ``Jcom`` of a humanoid at a tick runs one forward
 kinematics (in ``computeJointJacobians``) and one CoM pass; reading only ``com`` does

@@ -35,7 +35,11 @@ class Pool:
 
     def __init__(self) -> None:
         self._entities: dict[str, Entity] = {}
+        #: The current tick: the latest tick any signal was computed or written at
+        #: (``sig.value`` reads at this tick).
         self.time: int = 0
+        #: Topology counter, bumped on every plug, unplug, dependency or mode change;
+        #: compiled plans recompile when it moved.
         self.version: int = 0
         #: Held by a running loop during each tick; hold it to edit the graph atomically
         #: from another thread (``with pool.lock: ...``). Re-entrant.

@@ -147,6 +147,8 @@ class Signal:
         self.setConstant(v)
 
     def setConstant(self, v: Any) -> None:  # pragma: no cover - overridden
+        """Hold the constant ``v`` (converted to the signal's type); what else happens
+        depends on the kind of signal: see the input's and the output's."""
         raise NotImplementedError
 
     def _convert(self, v: Any) -> Any:

@@ -3,19 +3,19 @@
 SoT's ``MatrixHomogeneous`` is ``pinocchio.SE3`` here (the ``SE3`` signal type of
 :mod:`sotpy.dynamics.types`). The classes keep SoT's names (``docs/operators.md``):
 
-=============================  ===========================  ===============================
-class                          signals                      sout
-=============================  ===========================  ===============================
-``Multiply_of_matrixHomo``     sin0..sin{n-1} -> sout       ``sin0 * sin1 * ... ``
-``Inverse_of_matrixHomo``      sin -> sout                  ``sin^-1``
-``MatrixHomoToPoseUTheta``     sin -> sout (vector 6)       ``(p, log3(R))``
-``PoseUThetaToMatrixHomo``     sin (vector 6) -> sout       ``(exp3(u), p)``
-``MatrixHomoToPose``           sin -> sout (vector 3)       ``p``
-``Compose_R_and_T``            sin1 (3x3), sin2 (3) -> sout ``(R, p)``
-``HomoToMatrix``               sin -> sout (matrix 4x4)     the homogeneous matrix
-``MatrixToHomo``               sin (matrix 4x4) -> sout     the placement, checked
-``Multiply_matrixHomo_vector`` sin1, sin2 (3 or 4) -> sout  ``M p`` (point) or ``[M] x``
-=============================  ===========================  ===============================
+==============================  ============================  ============================
+class                           signals                       sout
+==============================  ============================  ============================
+``Multiply_of_matrixHomo``      sin0..sin{n-1} -> sout        ``sin0 * sin1 * ...``
+``Inverse_of_matrixHomo``       sin -> sout                   ``sin^-1``
+``MatrixHomoToPoseUTheta``      sin -> sout (vector 6)        ``(p, log3(R))``
+``PoseUThetaToMatrixHomo``      sin (vector 6) -> sout        ``(exp3(u), p)``
+``MatrixHomoToPose``            sin -> sout (vector 3)        ``p``
+``Compose_R_and_T``             sin1 (3x3), sin2 (3) -> sout  ``(R, p)``
+``HomoToMatrix``                sin -> sout (matrix 4x4)      the homogeneous matrix
+``MatrixToHomo``                sin (matrix 4x4) -> sout      the placement, checked
+``Multiply_matrixHomo_vector``  sin1, sin2 (3 or 4) -> sout   ``M p`` (point) or ``[M] x``
+==============================  ============================  ============================
 
 A 4 x 4 homogeneous matrix enters an SE3 input through ``MatrixToHomo`` (plugged) or
 ``pinocchio.SE3(M)`` (a constant), and leaves through ``HomoToMatrix``. Rotation

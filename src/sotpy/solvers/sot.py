@@ -254,6 +254,8 @@ class SOT(Entity):
             )
 
     def graphClusters(self) -> list[tuple[str, list[Entity]]]:
+        """The stack, drawn by :func:`~sotpy.graph.writeGraph` as a magenta cluster of the
+        tasks in priority order, chained by red edges."""
         return [(f"SOT {self.name}", list(self._stack))]
 
     # -- solve ------------------------------------------------------------------------
