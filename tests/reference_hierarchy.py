@@ -112,7 +112,8 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
 
     Returns ``(x, optimal)``: the minimum-norm point of the final optimal set and the
     optimal violation norm of each level over the optimal set of the levels above.
-    With ``damping`` (lambda, one number or one per level), level ``k`` minimises ``||w||^2 + lambda^2 ||x - x_{k-1}||^2``
+    With ``damping`` (lambda, one number or one per level), level ``k`` minimises
+    ``||w||^2 + lambda^2 ||x - x_{k-1}||^2``
     (``x_{k-1}`` the previous level's solution, ``x_0 = 0``) and its optimal set is the
     set of the levels above with the level's rows pinned as at its solution.
     A frozen row violated at its level's optimum (equality rows included) becomes the

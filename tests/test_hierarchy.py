@@ -492,13 +492,13 @@ def test_per_level_damping_matches_the_references(seed):
     equality stacks against the projector reference, mixed stacks against the cascade."""
     rng = np.random.default_rng(1000 + seed)
     levels = equality_stack(rng)
-    lams = [0.0, 0.0] + list(rng.uniform(0.0, 0.3, len(levels) - 2))
+    lams = [0.0, 0.0, *rng.uniform(0.0, 0.3, len(levels) - 2)]
     x_ref, optimal = projector_hierarchy(levels, damping=lams)
     res = solve_hierarchy(levels, damping=lams)
     assert np.abs(res.x - x_ref).max() <= 1e-9 * scaled(x_ref)
     np.testing.assert_allclose(res.residuals, optimal, rtol=1e-9, atol=1e-9 * scaled(x_ref))
     mixed = mixed_stack(rng)
-    lams = [0.0] + list(rng.uniform(0.05, 0.3, len(mixed) - 1))
+    lams = [0.0, *rng.uniform(0.05, 0.3, len(mixed) - 1)]
     x_ref, optimal = cascade_hierarchy(mixed, damping=lams)
     solver = HierarchySolver()
     for _ in range(2):  # the second call with the first one's warm starts and blocks
