@@ -71,6 +71,8 @@ def _pendulum_run(args: argparse.Namespace) -> int:
     return 0 if result["converged"] else 1
 
 
+#: The demos of ``sotpy demo``: name -> (help, function adding the demo's options,
+#: function running it and returning the exit status).
 DEMOS: dict[
     str,
     tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]],
@@ -296,6 +298,7 @@ def add_connect(subparsers: Any) -> None:
     p.set_defaults(func=_connect_run)
 
 
+#: The functions that each add one sub-command to the parser's sub-parsers.
 SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots]
 SUBCOMMANDS += [add_shell, add_serve, add_connect]
 
