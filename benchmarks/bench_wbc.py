@@ -20,6 +20,7 @@ def main() -> None:
     ap.add_argument("--strategy", default="OneLevelWeighted")
     args = ap.parse_args()
     warnings.simplefilter("ignore")  # the device's clamp reports while it sags
+    from sotpy._blas import limit_blas_threads
     from sotpy.dynamics import load_robot
     from sotpy.graph import plug
     from sotpy.solvers.controller import Controller
@@ -38,6 +39,7 @@ def main() -> None:
     ctrl.setResolutionStrategy(args.strategy)
     ctrl.activateTasksAndConstraints()
     ctrl.signal("hand").value = np.array([0.2, 0, 0.1, 0, 0, 0])
+    limit_blas_threads()  # as in a control loop (a HierarchySolver does it as well)
     core = ctrl.core
     q = robot.device.state.value
     v = np.zeros(robot.model.nv)
@@ -52,6 +54,7 @@ def main() -> None:
 
     dyn = med(lambda: core.robot.update(q, v), args.ticks)
     qp = med(lambda: core.tick(0.0, 0.001), args.ticks)
+    rows = med(core.problem, args.ticks)
     # whole entity tick: the device in torque mode with the controller plugged, minus
     # the same device step with a constant torque (the simulation's own cost)
     dev = robot.device
@@ -70,7 +73,7 @@ def main() -> None:
         f"  controller tick   {tick:.3f}   (device step {full:.3f} - without controller {sim:.3f})"
     )
     print(f"  dynamics          {dyn:.3f}")
-    print(f"  QP (rows + solve) {qp:.3f}")
+    print(f"  QP (rows + solve) {qp:.3f}   (rows {rows:.3f}, solve {qp - rows:.3f})")
     print(f"  graph + rest      {tick - dyn - qp:.3f}")
     print(f"  solution found    {ctrl.solutionFound.value}")
 

@@ -7,6 +7,9 @@
     sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
                                [--target-offset X Y Z] [--margin M] [--damping L]
     sotpy demo panda-torque [--duration S] [--strategy NAME] [--plot PATH]
+    sotpy demo talos-torque [--duration S] [--settle S] [--side left|right]
+                            [--strategy NAME] [--plot PATH]
+    sotpy demo torque-callbacks [--no-compute]
     sotpy robots
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
     sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
@@ -32,8 +35,12 @@ from .demos import (
     reach_run,
     robot_options,
     robot_run,
+    torque_callbacks_options,
+    torque_callbacks_run,
     torque_options,
     torque_run,
+    torque_talos_options,
+    torque_talos_run,
 )
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
@@ -94,6 +101,18 @@ DEMOS["panda-torque"] = (
     "with torque, position and velocity limits; --plot",
     torque_options,
     torque_run,
+)
+DEMOS["talos-torque"] = (
+    "torque control (ORCA-style): Talos on both feet (friction cones, CoP in the soles) "
+    "shifts its CoM over one foot and reaches with its right hand; --plot",
+    torque_talos_options,
+    torque_talos_run,
+)
+DEMOS["torque-callbacks"] = (
+    "torque control: the activation / deactivation callbacks of tasks and constraints, "
+    "printed in the order they run",
+    torque_callbacks_options,
+    torque_callbacks_run,
 )
 for _robot in REACH_ROBOTS:
     DEMOS[_robot] = (

@@ -5,6 +5,11 @@ command line and a script of ``examples/`` call.
   standing, :func:`~sotpy.demos.robot_tour.run_robot_tour`; ``sotpy demo robot``
   (options :func:`robot_options`, runner :func:`robot_run`, registered in
   ``sotpy.cli.DEMOS``).
+- :mod:`sotpy.demos.torque`: the torque-level controller (ORCA-style):
+  ``sotpy demo panda-torque`` (:func:`torque_options`, :func:`torque_run`),
+  ``sotpy demo talos-torque`` (:func:`torque_talos_options`, :func:`torque_talos_run`),
+  ``sotpy demo torque-callbacks`` (:func:`torque_callbacks_options`,
+  :func:`torque_callbacks_run`).
 - :mod:`sotpy.demos.reach`: the SoT slides' reaching demo on a humanoid (feet fixed,
   CoM over the support polygon, right wrist to a target, half-sitting, joint limits
   hard), :func:`~sotpy.demos.reach.run_reach`; ``sotpy demo talos``, ``romeo``,
@@ -35,8 +40,12 @@ __all__ = [
     "reach_run",
     "robot_options",
     "robot_run",
+    "torque_callbacks_options",
+    "torque_callbacks_run",
     "torque_options",
     "torque_run",
+    "torque_talos_options",
+    "torque_talos_run",
 ]
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
@@ -272,3 +281,104 @@ def torque_run(args: argparse.Namespace) -> int:
     if out["plot"]:
         print(f"plot: {out['plot']}")
     return 0 if ok else 1
+
+
+# -- sotpy demo talos-torque, torque-callbacks ----------------------------------------
+def torque_talos_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ``sotpy demo talos-torque``: ``--duration S``, ``--settle S``,
+    ``--side left|right``, ``--strategy``, ``--plot PATH``."""
+    parser.add_argument(
+        "--duration",
+        type=positive_float,
+        default=1.5,
+        metavar="S",
+        help="duration of the CoM shift and of the reach, s (default 1.5)",
+    )
+    parser.add_argument(
+        "--settle",
+        type=non_negative_float,
+        default=0.5,
+        metavar="S",
+        help="time at the goals afterwards, s (default 0.5)",
+    )
+    parser.add_argument(
+        "--side",
+        choices=("left", "right"),
+        default="left",
+        help="the foot the CoM moves over (default left)",
+    )
+    parser.add_argument(
+        "--strategy",
+        choices=TORQUE_STRATEGIES,
+        default="OneLevelWeighted",
+        help="resolution strategy of the controller",
+    )
+    parser.add_argument(
+        "--plot", metavar="PATH", help="save the contact forces, CoPs and CoM (PNG)"
+    )
+
+
+def torque_talos_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo talos-torque``: 0 when a solution was found every tick, the feet
+    stayed (drift < 1e-5 m), the simulated wrenches stayed in the friction cones with
+    the CoPs in the soles, and the CoM and the hand ended within 2 mm of their goals;
+    1 otherwise or on an error."""
+    from ..errors import SotpyError
+    from .torque import run_talos_torque
+
+    # the right hand reaches away from the body when the CoM goes right
+    offset = (0.15, 0.1, 0.1) if args.side == "left" else (0.15, -0.05, 0.1)
+    try:
+        out = run_talos_torque(
+            duration=args.duration,
+            settle=args.settle,
+            side=args.side,
+            hand_offset=offset,
+            strategy=args.strategy,
+            plot=args.plot,
+        )
+    except SotpyError as exc:
+        print(f"sotpy demo talos-torque: {exc}", file=sys.stderr)
+        return 1
+    ok = (
+        out["solution_found"]
+        and out["feet_drift"] < 1e-5
+        and out["min_fz"] > 0
+        and out["friction_ratio"] <= 1.0
+        and out["cop_margin"] >= 0
+        and out["com_error"] < 2e-3
+        and out["hand_error"] < 2e-3
+    )
+    print(
+        f"talos-torque {'OK' if ok else 'FAILED'}: feet drift {out['feet_drift']:.1e} m,"
+        f" min f_z {out['min_fz']:.0f} N, max |f_t|/(mu f_z) {out['friction_ratio']:.2f},"
+        f" min CoP margin {1e3 * out['cop_margin']:.1f} mm,"
+        f" CoM error {1e3 * out['com_error']:.2f} mm, hand error"
+        f" {1e3 * out['hand_error']:.2f} mm, max |tau|/limit {out['max_torque_ratio']:.2f},"
+        f" solution every tick: {out['solution_found']}"
+    )
+    if out["plot"]:
+        print(f"plot: {out['plot']}")
+    return 0 if ok else 1
+
+
+def torque_callbacks_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ``sotpy demo torque-callbacks``: ``--no-compute``."""
+    parser.add_argument(
+        "--no-compute",
+        action="store_true",
+        help="hide onComputeBegin / onComputeEnd (printed every tick otherwise)",
+    )
+
+
+def torque_callbacks_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo torque-callbacks`` (prints the sequence): 0, or 1 on an error."""
+    from ..errors import SotpyError
+    from .torque import run_callbacks
+
+    try:
+        run_callbacks(compute=not args.no_compute)
+    except SotpyError as exc:
+        print(f"sotpy demo torque-callbacks: {exc}", file=sys.stderr)
+        return 1
+    return 0

@@ -52,6 +52,7 @@ from ..errors import EntityError, SotpyError, SotpyWarning
 from ..graph import BOOL, DOUBLE, INT, VECTOR, Entity, Input, Output, OutputSignal, command, plug
 from ..graph.signal import InputSignal
 from .wbc import (
+    BilateralContactSpec,
     CartesianAccelerationTask,
     CoMAccelerationTask,
     ContactSpec,
@@ -70,9 +71,10 @@ from .wbc import (
     joint_pd,
     min_jerk,
     pose_pd,
+    wrench_pi,
 )
 
-__all__ = ["ComServo", "Controller", "JointServo", "MinJerk", "PoseServo"]
+__all__ = ["ComServo", "Controller", "JointServo", "MinJerk", "PoseServo", "WrenchServo"]
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 
@@ -140,6 +142,12 @@ class Controller(Entity):
     @Output(BOOL, deps=("solution",), doc="whether the QP was solved (False: fallback)")
     def solutionFound(self, _chi: np.ndarray) -> bool:
         return bool(self._last.found)
+
+    @Output(VECTOR, deps=("solution",), doc="activation ramps (tasks, then constraints)")
+    def ramps(self, _chi: np.ndarray) -> np.ndarray:
+        """The ramp (0..1) of every task then constraint, in ``rampNames()`` order, as
+        the last solve used them."""
+        return np.array([x.ramp for x in self.core._all()], dtype=float)
 
     @Output(VECTOR, deps=("model",), doc="CoM (3, m, world)")
     def com(self, _m: int) -> np.ndarray:
@@ -224,10 +232,7 @@ class Controller(Entity):
         return self.core.tasks[name]
 
     def _item(self, cmd: str, name: str) -> Any:
-        item = self.core.tasks.get(name) or self.core.constraints.get(name)
-        if item is None:
-            raise SotpyError(f"{self._who(cmd)}: no task or constraint named {name!r}")
-        return item
+        return self._wrap(cmd, self.core.item, name)
 
     def _wrap(self, cmd: str, fn: Any, *args: Any) -> Any:
         try:
@@ -405,8 +410,22 @@ class Controller(Entity):
         self.solution.setReady()
 
     @command
+    def addBilateralContact(self, name: str, frameA: str, frameB: str) -> None:
+        """A rigid contact between two frames of the robot (their relative placement is
+        kept; variables: the interaction wrench on ``frameB`` in its frame, 6); see
+        ``BilateralContactSpec``. Addressed by ``name`` (``removeContact``,
+        ``deactivate``, ``addWrenchTask``)."""
+        if any(c.key == name for c in self.core.contacts):
+            raise SotpyError(f"{self._who('addBilateralContact')}: contact {name!r} exists")
+        spec = BilateralContactSpec(frameA, frameB, name)
+        self._wrap("addBilateralContact", self.core.setContacts, [*self.core.contacts, spec])
+        self.solution.setReady()
+
+    @command
     def removeContact(self, frame: str) -> None:
-        left = [c for c in self.core.contacts if c.frame != frame]
+        """Remove a contact at once (its variables leave the layout; a wrench task on it
+        must be removed first). For a gradual release, ``deactivate(frame)``."""
+        left = [c for c in self.core.contacts if c.key != frame]
         if len(left) == len(self.core.contacts):
             raise SotpyError(f"{self._who('removeContact')}: no contact at {frame!r}")
         self._wrap("removeContact", self.core.setContacts, left)
@@ -414,7 +433,7 @@ class Controller(Entity):
 
     @command
     def getContacts(self) -> list[str]:
-        return [c.frame for c in self.core.contacts]
+        return [c.key for c in self.core.contacts]
 
     # -- strategy, options, life cycle ------------------------------------------------------
     @command
@@ -449,12 +468,16 @@ class Controller(Entity):
 
     @command
     def activate(self, name: str) -> None:
-        self._item("activate", name).activate()
+        """Start the activation ramp of a task, constraint or contact (by frame/name)."""
+        self._wrap("activate", self.core.activate, name)
         self.solution.setReady()
 
     @command
     def deactivate(self, name: str) -> None:
-        self._item("deactivate", name).deactivate()
+        """Start the deactivation ramp of a task, constraint or contact; a contact's
+        wrench is ramped down to 0 from its last value, then the contact is released
+        (see ``sotpy.solvers.wbc.ContactState``)."""
+        self._wrap("deactivate", self.core.deactivate, name)
         self.solution.setReady()
 
     @command
@@ -470,6 +493,11 @@ class Controller(Entity):
     @command
     def tasksAndConstraintsDeactivated(self) -> bool:
         return self.core.tasksAndConstraintsDeactivated()
+
+    @command
+    def rampNames(self) -> list[str]:
+        """Names of the entries of ``ramps``: the tasks, then the constraints."""
+        return [x.name for x in self.core._all()]
 
     @command
     def lastSolution(self) -> Any:
@@ -560,6 +588,15 @@ class _VectorServo(Entity):
         )
         return joint_pd(x, v, xd, vd, ad, kp, kd)
 
+    @Output(VECTOR, deps=("position", "reference"))
+    def error(self, x: np.ndarray, xd: np.ndarray) -> np.ndarray:
+        """``x - x_d`` (the unit of ``position``)."""
+        if len(x) != len(xd):
+            raise SotpyError(
+                f"{self.className}({self.name})::reference: expected size {len(x)}, got {len(xd)}"
+            )
+        return np.asarray(x, dtype=float) - xd
+
 
 class JointServo(_VectorServo):
     """PD on the actuated joints (plug ``Controller.jointPosition``/``jointVelocity``)."""
@@ -617,3 +654,88 @@ class MinJerk(Entity):
     def acceleration(self, t: int, dt: float) -> np.ndarray:
         """Desired acceleration (6, world axes)."""
         return self._at(t, dt)[2]
+
+
+class WrenchServo(Entity):
+    r"""PI on a wrench, for a wrench task: with the error ``e = w_d - w`` (the desired
+    minus the measured wrench, N and N m),
+
+    .. math:: I_k = \mathrm{clamp}(I_{k-1} + e_k \, \Delta t, -I_{max}, I_{max}), \qquad
+              w_{task} = w_d + K_p e_k + K_i I_k
+
+    (feed-forward plus PI; the integral, in N s, is clamped per axis to
+    ``integralLimit``: the anti-windup). ``Delta t`` is ``dt`` times the ticks since the
+    last computation (one tick at the first). ``desiredWrench`` is the wrench task's
+    input (plug it into ``Controller.<task>``); ``measured`` is a force sensor or the
+    simulated contact wrench, **not** the controller's own ``wrenches`` of the same tick
+    (a same-tick cycle). ``Kp`` (no unit) and ``Ki`` (1/s): one value or one per axis,
+    finite and >= 0; ``integralLimit`` (N s): one value or per axis, >= 0 (inf: none).
+    ``resetIntegral()`` sets ``I = 0``.
+    """
+
+    measured = Input(VECTOR, doc="measured wrench w (3 or 6: N, then N m)")
+    reference = Input(VECTOR, doc="desired wrench w_d (same size)")
+    Kp = Input(VECTOR, default=np.zeros(1), doc="proportional gain (one or per axis)")
+    Ki = Input(VECTOR, default=np.zeros(1), doc="integral gain, 1/s (one or per axis)")
+    integralLimit = Input(
+        VECTOR, default=np.full(1, np.inf), doc="anti-windup clamp of I, N s (one or per axis)"
+    )
+    dt = Input(DOUBLE, default=0.001, doc="tick period (s)")
+
+    def __init__(self, name: str) -> None:
+        self._integral: np.ndarray | None = None
+        self._tLast: int | None = None
+
+    def _vec(self, what: str, x: np.ndarray, n: int, allow_inf: bool = False) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        x = np.full(n, x[0]) if x.shape == (1,) else x
+        ok = np.all(~np.isnan(x)) and (allow_inf or np.all(np.isfinite(x)))
+        if x.shape != (n,) or not ok or np.any(x < 0):
+            raise SotpyError(
+                f"{self.className}({self.name})::{what}: expected 1 or {n} values >= 0"
+                f"{'' if allow_inf else ', finite'}, got {x}"
+            )
+        return x
+
+    @Output(
+        VECTOR,
+        deps=("measured", "reference", "Kp", "Ki", "integralLimit", "dt"),
+        withTime=True,
+        timeDependent=True,
+        doc="the wrench task's desired value (N, N m)",
+    )
+    def desiredWrench(self, t: int, w, wd, Kp, Ki, limit, dt) -> np.ndarray:
+        """``w_d + Kp e + Ki I`` (class doc)."""
+        n = len(wd)
+        if n not in (3, 6) or np.shape(w) != (n,):
+            raise SotpyError(
+                f"{self.className}({self.name})::measured: expected the size of reference "
+                f"(3 or 6), got {np.shape(w)} and {np.shape(wd)}"
+            )
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(wd))):
+            raise SotpyError(f"{self.className}({self.name}): measured/reference not finite")
+        kp = self._vec("Kp", Kp, n)
+        ki = self._vec("Ki", Ki, n)
+        lim = self._vec("integralLimit", limit, n, allow_inf=True)
+        if not (math.isfinite(dt) and dt > 0):
+            raise SotpyError(f"{self.className}({self.name})::dt: expected > 0 s, got {dt}")
+        if self._integral is None or self._integral.shape != (n,):
+            self._integral = np.zeros(n)
+        steps = 1 if self._tLast is None else max(t - self._tLast, 0)
+        self._tLast = t
+        out, self._integral = wrench_pi(
+            np.asarray(w, float), np.asarray(wd, float), self._integral, steps * dt, kp, ki, lim
+        )
+        return out
+
+    @command
+    def resetIntegral(self) -> None:
+        """Set the integral to zero (at the next computation)."""
+        self._integral = None
+        self._tLast = None
+        self.desiredWrench.setReady()
+
+    @command
+    def getIntegral(self) -> np.ndarray:
+        """The integral ``I`` (N s) after the last computation."""
+        return np.zeros(0) if self._integral is None else self._integral.copy()

@@ -12,6 +12,7 @@ from .activation import CALLBACKS, Activatable
 from .constraints import (
     Constraint,
     ContactConstraint,
+    ContactState,
     JointAccelerationLimit,
     JointPositionLimit,
     JointTorqueLimit,
@@ -19,8 +20,16 @@ from .constraints import (
     dynamics_rows,
     friction_rows,
 )
-from .model import ContactSpec, Layout, RobotModel
-from .servos import check_gains, joint_pd, min_jerk, min_jerk_scalar, pose_error, pose_pd
+from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
+from .servos import (
+    check_gains,
+    joint_pd,
+    min_jerk,
+    min_jerk_scalar,
+    pose_error,
+    pose_pd,
+    wrench_pi,
+)
 from .solver import STRATEGIES, Solution, WholeBodyController
 from .tasks import (
     CartesianAccelerationTask,
@@ -36,11 +45,13 @@ __all__ = [
     "CALLBACKS",
     "STRATEGIES",
     "Activatable",
+    "BilateralContactSpec",
     "CartesianAccelerationTask",
     "CoMAccelerationTask",
     "Constraint",
     "ContactConstraint",
     "ContactSpec",
+    "ContactState",
     "JointAccelerationLimit",
     "JointAccelerationTask",
     "JointPositionLimit",
@@ -62,4 +73,5 @@ __all__ = [
     "min_jerk_scalar",
     "pose_error",
     "pose_pd",
+    "wrench_pi",
 ]

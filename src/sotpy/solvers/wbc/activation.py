@@ -6,7 +6,8 @@ States and transitions (``dt`` the control period, ``T`` the ramp duration)::
     active --deactivate()--> deactivating --(ramp reaches 0)--> inactive
 
 The ramp ``r`` goes linearly from 0 to 1 in ``T`` seconds (``r += dt / T`` each tick;
-``T = 0``: one tick) and back down. A task's weight is multiplied by ``r``; a
+``T = 0``: one tick; a value within 1e-9 of 1 is 1, so ``T = 3 dt`` takes exactly 3
+ticks) and back down (a value within 1e-9 of 0 is 0). A task's weight is multiplied by ``r``; a
 constraint is enforced while it is not ``inactive`` (its bounds are not ramped).
 
 Callbacks (set with :meth:`Activatable.setCallback`, names as ORCA's):
@@ -25,6 +26,8 @@ from typing import Any
 from ...errors import SotpyError
 
 __all__ = ["CALLBACKS", "Activatable"]
+
+_SNAP = 1e-9  # ramps within this of 0 or 1 are snapped to it
 
 CALLBACKS = (
     "onActivation",
@@ -94,10 +97,13 @@ class Activatable:
             return False
         self._call("onComputeBegin", t, dt)
         step = 1.0 if self.ramp_duration <= 0.0 else dt / self.ramp_duration
+        # a ramp within rounding of its end is at its end (1/3 + 1/3 + 1/3 is not 1)
         if self.state == "activating":
-            self.ramp = min(1.0, self.ramp + step)
+            r = self.ramp + step
+            self.ramp = 1.0 if r >= 1.0 - _SNAP else r
         elif self.state == "deactivating":
-            self.ramp = max(0.0, self.ramp - step)
+            r = self.ramp - step
+            self.ramp = 0.0 if r <= _SNAP else r
         return True
 
     def end(self, t: float, dt: float) -> None:

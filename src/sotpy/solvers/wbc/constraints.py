@@ -6,10 +6,16 @@ constraint                  rows
 dynamics (always on)        ``M a - S^T tau - sum_c J_c^T f_c = -b`` (equality, nv rows)
 JointTorqueLimit            ``tau_min <= tau <= tau_max`` (N m)
 JointPositionLimit(h)       ``q_min <= q + h v + h^2/2 a <= q_max`` for the 1-D joints
-                            with finite limits, horizon ``h`` (s)
+                            with finite limits, horizon ``h`` (s), and the next tick's
+                            ``q + dt v + dt^2 a`` (the semi-implicit Euler step of the
+                            Device, ``dt`` the control period): a continuous-time
+                            horizon alone lets the discrete step overshoot
 JointVelocityLimit(h)       ``v_min <= v + h a <= v_max`` (horizon ``h``, s)
 JointAccelerationLimit      ``a_min <= a <= a_max`` (actuated joints)
-ContactConstraint           per contact: ``J_c a + Jdot_c v = 0`` (LOCAL, the contact point
+ContactConstraint           per contact (with its life cycle, :class:`ContactState`;
+                            bilateral contacts: ``J_rel a + drift_rel = 0``, see
+                            :class:`~.model.BilateralContactSpec`, no friction rows):
+                            ``J_c a + Jdot_c v = 0`` (LOCAL, the contact point
                             does not accelerate; 6 rows, 3 for a point), and its
                             friction/CoP polyhedron on ``f_c`` (LOCAL, z the normal):
                             ``f_z >= fmin``, ``|f_x|, |f_y| <= mu/sqrt(2) f_z`` (inner
@@ -39,6 +45,7 @@ from .model import ContactSpec, Layout, RobotModel
 __all__ = [
     "Constraint",
     "ContactConstraint",
+    "ContactState",
     "JointAccelerationLimit",
     "JointPositionLimit",
     "JointTorqueLimit",
@@ -57,8 +64,7 @@ def dynamics_rows(robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.nda
     A[:, layout.a] = robot.M
     A[:, layout.tau] = -robot.S.T
     for c in layout.contacts:
-        J = robot.frame_jacobian(robot.frame_id(c.frame), _LOCAL)[: c.dim]
-        A[:, layout.f[c.frame]] = -J.T
+        A[:, layout.f[c.key]] = -robot.contact_jacobian(c).T
     return A, -robot.b
 
 
@@ -193,13 +199,14 @@ class JointVelocityLimit(Constraint):
         iv = robot.actuated[keep]
         h = self.horizon
         C = np.zeros((len(keep), layout.n))
-        C[np.arange(len(keep)), iv] = h
+        C[np.arange(len(keep)), iv] = 1.0  # (v_min - v) / h <= a <= (v_max - v) / h
         v = robot.v[iv]
-        return C, _clip(self.lower[keep]) - v, _clip(self.upper[keep]) - v
+        return C, (_clip(self.lower[keep]) - v) / h, (_clip(self.upper[keep]) - v) / h
 
 
 class JointPositionLimit(Constraint):
-    """``q_min <= q + h v + h^2/2 a <= q_max`` for the one-dimensional joints."""
+    """``q_min <= q + h v + h^2/2 a <= q_max`` and ``q_min <= q + dt v + dt^2 a <= q_max``
+    (the next tick, ``dt = robot.dt``) for the one-dimensional joints."""
 
     def __init__(self, name: str, robot: RobotModel, horizon: float) -> None:
         super().__init__(name)
@@ -212,37 +219,98 @@ class JointPositionLimit(Constraint):
         self.lower, self.upper = lo[keep], hi[keep]
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        h = self.horizon
+        h, dt = self.horizon, robot.dt
         m = len(self.iq)
-        C = np.zeros((m, layout.n))
-        C[np.arange(m), self.iv] = 0.5 * h * h
-        pred = robot.q[self.iq] + h * robot.v[self.iv]
-        return C, self.lower - pred, self.upper - pred
+        # rows scaled to a unit coefficient on a (bounds on a, rad/s^2): a row
+        # dt^2 a <= ... would be met within the QP's tolerance by far too much
+        C = np.zeros((2 * m, layout.n))
+        C[np.arange(2 * m), np.tile(self.iv, 2)] = 1.0
+        q, v = robot.q[self.iq], robot.v[self.iv]
+        pred = np.concatenate([q + h * v, q + dt * v])
+        scale = np.concatenate([np.full(m, 2.0 / (h * h)), np.full(m, 1.0 / (dt * dt))])
+        lo, hi = np.tile(self.lower, 2), np.tile(self.upper, 2)
+        return C, (lo - pred) * scale, (hi - pred) * scale
+
+
+class ContactState(Activatable):
+    """The life cycle of one contact (created **active**: a declared contact holds).
+
+    ``deactivate()`` ramps the contact's wrench down to zero before releasing it, and
+    ``activate()`` ramps it up (the :mod:`.activation` ramp ``r``, duration
+    ``setRampDuration``), so that a foot is unloaded before it lifts and loaded
+    gradually after it lands:
+
+    * active: the contact rows (no acceleration, friction/CoP of a unilateral contact);
+    * deactivating / activating: the same, plus ``f_z <= r F`` (unilateral) or
+      ``|f_i| <= r |F_i|`` per component (bilateral; not while activating: a rigid
+      loop closes at once), where ``F`` is the contact's wrench of the last solution
+      when ``deactivate()`` was called (``scale``; a unilateral contact without a
+      solution yet: the robot's weight), and the robot's weight ``m |g|`` (N) for the
+      activation of a unilateral contact;
+    * inactive: no acceleration row, and ``f_c = 0`` (the variables stay in the layout).
+    """
+
+    def __init__(self, spec: object) -> None:
+        super().__init__(getattr(spec, "key", str(spec)))
+        self.spec = spec
+        self.state = "active"
+        self.ramp = 1.0
+        self.scale: np.ndarray | None = None
 
 
 class ContactConstraint(Constraint):
-    """The unilateral contacts of the layout: no contact acceleration, friction, CoP."""
+    """The contacts of the layout: no contact acceleration, friction, CoP (unilateral),
+    with each contact's life cycle (:class:`ContactState`, ``states`` by key)."""
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
+        self.states: dict[str, ContactState] = {}
+        self._friction: dict[ContactSpec, tuple[np.ndarray, np.ndarray]] = {}  # constant
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         blocks, lbs, ubs = [], [], []
         for c in layout.contacts:
-            fid = robot.frame_id(c.frame)
+            st = self.states.get(c.key)
+            state = "active" if st is None else st.state
+            sl = layout.f[c.key]
             d = c.dim
+            if state == "inactive":
+                C = np.zeros((d, layout.n))
+                C[np.arange(d), np.arange(sl.start, sl.stop)] = 1.0
+                blocks.append(C)
+                lbs.append(np.zeros(d))
+                ubs.append(np.zeros(d))
+                continue
             C = np.zeros((d, layout.n))
-            C[:, layout.a] = robot.frame_jacobian(fid, _LOCAL)[:d]
-            drift = robot.frame_drift(fid, _LOCAL)[:d]
+            C[:, layout.a] = robot.contact_jacobian(c)
+            drift = robot.contact_drift(c)
             blocks.append(C)
             lbs.append(-drift)
             ubs.append(-drift)
-            G, hh = friction_rows(c)
-            C2 = np.zeros((len(hh), layout.n))
-            C2[:, layout.f[c.frame]] = G
-            blocks.append(C2)
-            lbs.append(np.full(len(hh), -np.inf))
-            ubs.append(hh)
+            if not c.bilateral:
+                G, hh = self._friction.get(c) or self._friction.setdefault(c, friction_rows(c))
+                C2 = np.zeros((len(hh), layout.n))
+                C2[:, sl] = G
+                blocks.append(C2)
+                lbs.append(np.full(len(hh), -np.inf))
+                ubs.append(hh)
+            if state == "active" or st is None:
+                continue
+            r = st.ramp
+            if not c.bilateral:
+                F = robot.weight if state == "activating" or st.scale is None else st.scale[2]
+                C3 = np.zeros((1, layout.n))
+                C3[0, sl.start + 2] = 1.0
+                blocks.append(C3)
+                lbs.append(np.array([-np.inf]))
+                ubs.append(np.array([r * max(float(F), 0.0)]))
+            elif state == "deactivating" and st.scale is not None:
+                C3 = np.zeros((d, layout.n))
+                C3[np.arange(d), np.arange(sl.start, sl.stop)] = 1.0
+                bound = r * np.abs(st.scale)
+                blocks.append(C3)
+                lbs.append(-bound)
+                ubs.append(bound)
         if not blocks:
             return np.zeros((0, layout.n)), np.zeros(0), np.zeros(0)
         return np.vstack(blocks), np.concatenate(lbs), np.concatenate(ubs)

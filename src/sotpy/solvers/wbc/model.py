@@ -41,7 +41,7 @@ import pinocchio as pin
 
 from ...errors import SotpyError
 
-__all__ = ["ContactSpec", "Layout", "RobotModel"]
+__all__ = ["BilateralContactSpec", "ContactSpec", "Layout", "RobotModel"]
 
 LWA = pin.LOCAL_WORLD_ALIGNED
 
@@ -69,11 +69,58 @@ class ContactSpec:
     offset: tuple[float, float] = (0.0, 0.0)
     fmin: float = 0.0
 
+    @property
+    def key(self) -> str:
+        """The contact's name in the layout and the commands: its frame."""
+        return self.frame
+
+    bilateral = False
+
+
+@dataclass(frozen=True)
+class BilateralContactSpec:
+    r"""A rigid (bilateral) contact between two frames of the robot: their relative
+    placement stays constant (a closed kinematic loop: hands holding each other, a
+    gripper bolted to a fixture carried by the robot).
+
+    With ``M = B^{-1} A`` (the placement of ``frame_a`` in ``frame_b``) and the LOCAL
+    twists ``nu_A = J_A v``, ``nu_B = J_B v``, the relative twist of B with respect to A,
+    in B's frame, is ``nu_rel = nu_B - Ad_M nu_A``; its derivative is::
+
+        d/dt nu_rel = J_rel a + drift_rel,   J_rel = J_B - Ad_M J_A,
+        drift_rel = Jdot_B v - Ad_M Jdot_A v + ad(nu_B) Ad_M nu_A
+
+    (``Jdot v`` the LOCAL spatial drifts; ``d/dt Ad_M = Ad_M ad(nu_A) - ad(nu_B) Ad_M``).
+    The constraint is ``J_rel a + drift_rel = 0``, and the contact's decision variable
+    is the **interaction wrench** ``f`` (6: force then torque) exerted by A's body on
+    B's, in B's frame at its origin; the reaction on A is ``-Ad_M^T f``, so the
+    generalised force is ``J_rel^T f`` (the power ``f . nu_rel``). No friction or
+    unilateral condition: any wrench (a wrench task can ask for a squeeze).
+
+    Attributes:
+        frame_a, frame_b: the two Pinocchio frames (different).
+        name: the contact's key (default ``"frame_a|frame_b"``).
+    """
+
+    frame_a: str
+    frame_b: str
+    name: str = ""
+    dim = 6
+    bilateral = True
+
+    @property
+    def key(self) -> str:
+        return self.name or f"{self.frame_a}|{self.frame_b}"
+
+    @property
+    def frame(self) -> str:  # the layout's key, as ContactSpec.frame
+        return self.key
+
 
 class Layout:
     """Where each block of ``chi = (a, tau, f_1..f_p)`` lives."""
 
-    def __init__(self, nv: int, na: int, contacts: list[ContactSpec]) -> None:
+    def __init__(self, nv: int, na: int, contacts: list) -> None:
         self.nv = nv
         self.na = na
         self.contacts = list(contacts)
@@ -82,13 +129,13 @@ class Layout:
         self.f: dict[str, slice] = {}
         i = nv + na
         for c in self.contacts:
-            self.f[c.frame] = slice(i, i + c.dim)
+            self.f[c.key] = slice(i, i + c.dim)
             i += c.dim
         self.nf = i - nv - na
         self.n = i
 
     def __repr__(self) -> str:
-        return f"Layout(nv={self.nv}, na={self.na}, contacts={[c.frame for c in self.contacts]})"
+        return f"Layout(nv={self.nv}, na={self.na}, contacts={[c.key for c in self.contacts]})"
 
 
 class RobotModel:
@@ -109,6 +156,9 @@ class RobotModel:
         self.S = np.zeros((self.na, self.nv))
         self.S[np.arange(self.na), self.actuated] = 1.0
         self._a0 = np.zeros(self.nv)
+        self.dt = 0.001  # the control period of the tick (s), set by the controller
+        self.mass = float(pin.computeTotalMass(model))
+        self._fids: dict[str, int] = {}  # frame name -> id (the model is fixed)
         self.q: np.ndarray | None = None
         self.v: np.ndarray | None = None
         # joint position coordinates of the actuated one-dimensional joints
@@ -123,9 +173,12 @@ class RobotModel:
 
     def frame_id(self, frame: str, who: str = "RobotModel") -> int:
         """The id of ``frame``; raises SotpyError naming ``who`` if it does not exist."""
-        if not self.model.existFrame(frame):
-            raise SotpyError(f"{who}: the model has no frame named {frame!r}")
-        return int(self.model.getFrameId(frame))
+        fid = self._fids.get(frame)
+        if fid is None:
+            if not self.model.existFrame(frame):
+                raise SotpyError(f"{who}: the model has no frame named {frame!r}")
+            fid = self._fids[frame] = int(self.model.getFrameId(frame))
+        return fid
 
     def update(self, q: np.ndarray, v: np.ndarray) -> None:
         """Run the Pinocchio passes at ``(q, v)`` (sizes nq, nv, finite)."""
@@ -165,6 +218,33 @@ class RobotModel:
         if ref == LWA:
             return pin.getFrameClassicalAcceleration(self.model, self.data, fid, LWA).vector.copy()
         return pin.getFrameAcceleration(self.model, self.data, fid, ref).vector.copy()
+
+    def contact_jacobian(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
+        """``J_c`` (dim x nv): LOCAL frame Jacobian (first ``dim`` rows) of a contact, or
+        ``J_rel`` of a bilateral one (:class:`BilateralContactSpec`)."""
+        if not c.bilateral:
+            return self.frame_jacobian(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
+        fa, fb = self.frame_id(c.frame_a), self.frame_id(c.frame_b)
+        M = self.data.oMf[fb].actInv(self.data.oMf[fa])
+        return self.frame_jacobian(fb, pin.LOCAL) - M.action @ self.frame_jacobian(fa, pin.LOCAL)
+
+    def contact_drift(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
+        """``Jdot_c v`` (LOCAL spatial drift; ``drift_rel`` of a bilateral contact)."""
+        if not c.bilateral:
+            return self.frame_drift(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
+        m, d = self.model, self.data
+        fa, fb = self.frame_id(c.frame_a), self.frame_id(c.frame_b)
+        M = d.oMf[fb].actInv(d.oMf[fa])
+        nu_a = pin.getFrameVelocity(m, d, fa, pin.LOCAL)
+        nu_b = pin.getFrameVelocity(m, d, fb, pin.LOCAL)
+        da = pin.getFrameAcceleration(m, d, fa, pin.LOCAL)
+        db = pin.getFrameAcceleration(m, d, fb, pin.LOCAL)
+        return (db - M.act(da) + nu_b.cross(M.act(nu_a))).vector.copy()
+
+    @property
+    def weight(self) -> float:
+        """The robot's weight ``m |g|`` (N)."""
+        return self.mass * float(np.linalg.norm(self.model.gravity.linear))
 
     # -- centre of mass -----------------------------------------------------------------
     @property

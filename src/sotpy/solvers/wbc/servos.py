@@ -29,7 +29,15 @@ import pinocchio as pin
 
 from ...errors import SotpyError
 
-__all__ = ["check_gains", "joint_pd", "min_jerk", "min_jerk_scalar", "pose_error", "pose_pd"]
+__all__ = [
+    "check_gains",
+    "joint_pd",
+    "min_jerk",
+    "min_jerk_scalar",
+    "pose_error",
+    "pose_pd",
+    "wrench_pi",
+]
 
 
 def check_gains(
@@ -114,3 +122,19 @@ def min_jerk(
     M = pin.SE3(R, start.translation + s * dp)
     ww = start.rotation @ w
     return M, np.concatenate([ds * dp, ds * ww]), np.concatenate([dds * dp, dds * ww])
+
+
+def wrench_pi(
+    w: np.ndarray,
+    wd: np.ndarray,
+    integral: np.ndarray,
+    dt: float,
+    Kp: np.ndarray,
+    Ki: np.ndarray,
+    limit: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the wrench PI: ``e = wd - w``, ``I+ = clamp(I + e dt, -limit, limit)``,
+    returns ``(wd + Kp e + Ki I+, I+)`` (N / N m, N s)."""
+    e = wd - w
+    integral = np.clip(integral + e * dt, -limit, limit)
+    return wd + Kp * e + Ki * integral, integral
