@@ -268,26 +268,27 @@ class SOT(Entity):
                 f"{self.damping.name}: expected a finite damping >= 0, got {damping}"
             )
         levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        lams: list[float] = []
         if self._jointLimits:
             levels.append(self._limitLevel(next(it), next(it), next(it), next(it), next(it)))
+            lams.append(0.0)  # the joint limits: hard, never damped
+        overrides = self._taskDamping
+        ndarray = np.ndarray
         for task in self._stack:
             J = next(it)
-            if np.ndim(J) != 2 or J.shape[1] != nv:
+            if type(J) is not ndarray or J.ndim != 2 or J.shape[1] != nv:
                 raise SignalTypeError(
                     f"SOT({self.name}): {task.jacobian.name} has shape {np.shape(J)}, "
                     f"expected (m, {nv})"
                 )
             if task.isInequality:
-                lower, upper = next(it), next(it)
+                levels.append((J, next(it), next(it)))
             else:
-                lower = upper = next(it)
-            levels.append((J, lower, upper))
+                b = next(it)
+                levels.append((J, b, b))
+            lams.append(overrides.get(task.name, damping) if overrides else damping)
         if not levels:
             return np.zeros(nv)
-        lams = [0.0] * (len(levels) - len(self._stack))  # the joint limits: hard
-        overrides = self._taskDamping
-        for task in self._stack:
-            lams.append(overrides.get(task.name, damping))
         result = self._solver.solve(levels, damping=lams)
         self.lastResult = result
         hard = self._jointLimits or self._stack[0].isInequality
