@@ -190,6 +190,7 @@ class _Structure:
         "box_full",
         "bufs",
         "d",
+        "daqp_failed",
         "din",
         "eq_bounds",
         "eq_full",
@@ -453,6 +454,7 @@ class HierarchySolver:
         st.qps = {}
         st.warm = {}
         st.bufs = {}
+        st.daqp_failed = set()
         st.active = set()
         st.shortcut_ok = True
         st.box = None
@@ -840,7 +842,7 @@ class HierarchySolver:
         # coordinates (DAQP reuses its previous working set instead)
         v0 = z0 = None
         warm = st.warm.get(k)
-        if warm is not None and self._qp_class is ProxQP:
+        if warm is not None and self._warm_proxsuite(st, k):
             xprev, wprev, zprev = warm
             v0 = np.empty(nv)
             v0[:nf] = Z.T @ (xprev - x)
@@ -871,7 +873,7 @@ class HierarchySolver:
         # have a zero multiplier), while proxsuite's are noisy at the 1e-8 level and a
         # row pinned by mistake would cost the levels below.
         tol_pin = 10.0 * eps
-        if lam == 0.0 and self._qp_class is DaqpQP:
+        if lam == 0.0 and self._exact_multipliers(st, k):
             za = np.abs(z)
             if mi:
                 np.maximum(za[i0:], np.abs(w), out=za[i0:])
@@ -898,19 +900,41 @@ class HierarchySolver:
         _widen(st, i1, st.Ain[:i1] @ stepper.x_aug)
         return r, its, ok
 
-    def _run_qp(self, st, key, H, g, C, lo, up, v0, z0):
-        """Solve with the level's persistent QP; if DAQP fails, proxsuite once."""
+    def _run_qp(self, st, key, H, g, C, lo, up, v0, z0, fallback: bool = True):
+        """Solve with the level's persistent QP; if DAQP fails, a fresh proxsuite problem
+        solves it, and keeps solving this level (until the stack's shape changes): a
+        DAQP that hit its iteration limit once on a level tends to again, at a high cost
+        per tick. (A fresh, cold proxsuite problem measured faster on those levels than
+        a persistent warm-started one.)"""
+        if key in st.daqp_failed:
+            return self._fresh_proxsuite(H, g, C, lo, up)
         qp = st.qps.get(key)
         if qp is None:
             qp = st.qps[key] = self._qp_class(self._qp_eps, self.max_iter)
         sol, z = qp.solve(H, g, C, lo, up, v0, z0)
         its, ok = qp.iterations, qp.status_ok
-        if not ok and self._qp_class is DaqpQP:
-            fallback = ProxQP(max(self.eps, 1e-8), 10 * self.max_iter)
-            sol, z = fallback.solve(H, g, C, lo, up)
-            its += fallback.iterations
-            ok = fallback.status_ok
+        if not ok and type(qp) is DaqpQP and fallback:
+            st.daqp_failed.add(key)
+            sol, z, its2, ok = self._fresh_proxsuite(H, g, C, lo, up)
+            its += its2
         return sol, z, its, ok
+
+    def _fresh_proxsuite(self, H, g, C, lo, up):
+        fallback = ProxQP(max(self.eps, 1e-8), 10 * self.max_iter)
+        sol, z = fallback.solve(H, g, C, lo, up)
+        return sol, z, fallback.iterations, fallback.status_ok
+
+    def _exact_multipliers(self, st: _Structure, key) -> bool:
+        """Whether the level's last QP came from DAQP (exact working-set multipliers)."""
+        return key not in st.daqp_failed and type(st.qps.get(key)) is DaqpQP
+
+    def _warm_proxsuite(self, st: _Structure, key) -> bool:
+        """Whether the level's QP is a persistent proxsuite one (warm-started from a
+        mapped guess)."""
+        if key in st.daqp_failed:
+            return False
+        qp = st.qps.get(key)
+        return type(qp) is ProxQP or (qp is None and self._qp_class is ProxQP)
 
     def _min_norm(self, st: _Structure, stepper: NullspaceStepper) -> tuple[int, bool]:
         """Move to the minimum-norm point of ``x + range(Z)`` within the frozen rows."""
@@ -927,12 +951,23 @@ class HierarchySolver:
         v = red[:, -1]
         warm = st.warm.get("min_norm")
         v0 = z0 = None
-        if warm is not None and self._qp_class is ProxQP:
+        if warm is not None and self._warm_proxsuite(st, "min_norm"):
             v0 = Z.T @ (warm[0] - x)
             z0 = warm[1]
         nf = stepper.nf
+        # no proxsuite fallback here: on the thin, degenerate sets this QP sees it took
+        # up to 10^5 iterations (seconds); the optimal point is kept instead
         y, z, its, ok = self._run_qp(
-            st, "min_norm", np.eye(nf), c, red[:, :nf].copy(), st.lo_adj - v, st.hi_adj - v, v0, z0
+            st,
+            "min_norm",
+            np.eye(nf),
+            c,
+            red[:, :nf].copy(),
+            st.lo_adj - v,
+            st.hi_adj - v,
+            v0,
+            z0,
+            fallback=False,
         )
         if not ok:  # keep the optimal (not minimum-norm) point
             st.warm.pop("min_norm", None)
