@@ -125,3 +125,21 @@ def test_wrong_bound_is_released_by_its_multiplier(kkt_calls):
     res = solver.solve(levels)
     np.testing.assert_allclose(res.x, x_ref, atol=1e-7)
     assert not solver._structure.box.at_hi[0]
+
+
+def test_refused_shape_is_not_retried_every_call(kkt_calls):
+    """A last level that leaves directions free (a posture without the free flyer's
+    columns): the KKT matrix is singular; after one refusal the next calls go straight
+    to the null-space recursion (retried after a while), with the same answer."""
+    rng = np.random.default_rng(8)
+    n = 12
+    posture = np.zeros((n - 6, n))
+    posture[:, 6:] = np.eye(n - 6)
+    b = rng.standard_normal(n - 6)
+    levels = [(np.eye(n), -np.ones(n), np.ones(n)), (posture, b, b)]
+    x_ref, _ = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    for _ in range(10):
+        res = solver.solve(levels)
+        np.testing.assert_allclose(res.x, x_ref, atol=1e-6)
+    assert kkt_calls["refused"] == 1 and kkt_calls["ok"] == 0

@@ -98,6 +98,8 @@ _F64 = np.dtype(np.float64)
 _BACKENDS = ("auto", "proxsuite", "daqp")
 #: primal-dual corrections of the box path's active set before falling back to QPs
 _BOX_ITERATIONS = 4
+#: calls to skip the KKT solve after it was refused
+_KKT_RETRY = 50
 _NO_INDEX = np.zeros(0, dtype=np.intp)
 _NO_VALUE = np.zeros(0)
 
@@ -198,6 +200,7 @@ class _Structure:
         "hi_adj",
         "in_idx",
         "key",
+        "kkt_wait",
         "last",
         "lo",
         "lo_adj",
@@ -445,6 +448,7 @@ class HierarchySolver:
         st.warm = {}
         st.blocks = [(k, k + 1) for k in range(len(sizes)) if sizes[k] > 0]
         st.eq_full = None
+        st.kkt_wait = 0
         self._structure = st
         return st
 
@@ -523,7 +527,7 @@ class HierarchySolver:
         every level but the last of full row rank at the previous call; None if not."""
         levels = [int(k) for k in st.nonempty]
         full = st.eq_full
-        if full is None or len(full) != len(levels):
+        if full is None or len(full) != len(levels) or self._kkt_waiting(st):
             return None
         A = st.A
         starts = st.starts
@@ -537,10 +541,21 @@ class HierarchySolver:
         else:
             return None
         if out is None:
+            st.kkt_wait = _KKT_RETRY
             return None
         stepper.reset()
         stepper.set_point(out[0])
         return self._kkt_ranks(st.sizes, levels, full)
+
+    @staticmethod
+    def _kkt_waiting(st: _Structure) -> bool:
+        """After a refused KKT solve (singular or ill-conditioned: e.g. a last level
+        that leaves some direction free), the next calls go straight to the null-space
+        recursion; the KKT solve is tried again after :data:`_KKT_RETRY` calls."""
+        if st.kkt_wait > 0:
+            st.kkt_wait -= 1
+            return True
+        return False
 
     def _kkt_ranks(self, sizes, levels: list[int], full: list[bool]) -> np.ndarray:
         """Ranks after a KKT solve: the rows of each full level; the last (least-squares)
@@ -658,9 +673,10 @@ class HierarchySolver:
         eps = self.eps
         n = self.n
         i_lower = st.eq_bounds[0][3]  # inequality rows of the levels below level 0
-        for _ in range(_BOX_ITERATIONS):
+        for it in range(_BOX_ITERATIONS):
             W, values, s = box.fixed()
-            verdict = self._box_kkt(st, stepper, W, values, s)
+            # a refusal on a corrected guess says little about the next calls
+            verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
             if verdict is None:  # the shape does not allow one KKT solve: level by level
                 stepper.fix(W, values)
                 dual = DualCheck(n, W, s) if len(W) else None
@@ -698,6 +714,7 @@ class HierarchySolver:
         W: np.ndarray,
         values: np.ndarray,
         s: np.ndarray,
+        remember: bool = True,
     ) -> tuple[np.ndarray, DualCheck | None] | None:
         """The box path's solve as one KKT system (see :mod:`._kkt`) when the levels
         below had the shape it needs at the previous call. Returns the ranks and the
@@ -705,7 +722,7 @@ class HierarchySolver:
         None: not applicable, ill-conditioned, or a bound whose multiplier at the last
         level is zero (then the minimum-norm criterion decides, level by level)."""
         full = st.box_full
-        if full is None:
+        if full is None or self._kkt_waiting(st):
             return None
         eb = st.eq_bounds
         levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
@@ -721,6 +738,8 @@ class HierarchySolver:
         else:
             return None
         if out is None:
+            if remember:
+                st.kkt_wait = _KKT_RETRY
             return None
         x, mu = out
         dual = None
