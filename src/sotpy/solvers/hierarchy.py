@@ -82,7 +82,7 @@ import numpy as np
 from sotpy._blas import limit_blas_threads
 from sotpy.errors import SolverError
 
-from ._boxset import BoxActiveSet, DualCheck
+from ._boxset import DUAL_TOL, BoxActiveSet, DualCheck
 from ._cascade import DaqpQP, ProxQP, daqp_available
 from ._equality import NullspaceStepper
 from ._kkt import kkt_solve
@@ -677,12 +677,14 @@ class HierarchySolver:
             W, values, s = box.fixed()
             # a refusal on a corrected guess says little about the next calls
             verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
+            dual = None
             if verdict is None:  # the shape does not allow one KKT solve: level by level
                 stepper.fix(W, values)
                 dual = DualCheck(n, W, s) if len(W) else None
                 ranks = self._box_steps(st, stepper, dual)
+                release = -1
             else:
-                ranks, dual = verdict
+                ranks, release = verdict
             x = stepper.x
             low = x < box.lo - eps
             high = x > box.hi + eps
@@ -692,10 +694,11 @@ class HierarchySolver:
                 continue
             if dual is not None:
                 dual.finish(x)
-                if dual.failed:
-                    j = W[dual.worst]
-                    box.at_lo[j] = box.at_hi[j] = False
-                    continue
+                release = dual.worst if dual.failed else -1
+            if release >= 0:  # a bound the optimum would leave: release it, try again
+                j = W[release]
+                box.at_lo[j] = box.at_hi[j] = False
+                continue
             if i_lower < len(st.in_idx):
                 v = st.Ain[i_lower:] @ stepper.x_aug
                 if not (
@@ -715,12 +718,13 @@ class HierarchySolver:
         values: np.ndarray,
         s: np.ndarray,
         remember: bool = True,
-    ) -> tuple[np.ndarray, DualCheck | None] | None:
+    ) -> tuple[np.ndarray, int] | None:
         """The box path's solve as one KKT system (see :mod:`._kkt`) when the levels
         below had the shape it needs at the previous call. Returns the ranks and the
-        dual verdict (a :class:`DualCheck` already decided, or None without bounds), or
-        None: not applicable, ill-conditioned, or a bound whose multiplier at the last
-        level is zero (then the minimum-norm criterion decides, level by level)."""
+        position in ``W`` of a bound to release (its multiplier has the wrong sign; -1:
+        none), or None: not applicable, ill-conditioned, or a bound whose multiplier at
+        the last level is zero (then the minimum-norm criterion decides, level by
+        level)."""
         full = st.box_full
         if full is None or self._kkt_waiting(st):
             return None
@@ -742,20 +746,16 @@ class HierarchySolver:
                 st.kkt_wait = _KKT_RETRY
             return None
         x, mu = out
-        dual = None
+        release = -1
         if len(W):
             # releasing bound j changes the last objective at the rate -s_j mu_j
             rate = -s * mu
-            scale = 1.0 + float(np.abs(mu).max())
-            tol = 1e-10 * scale
+            tol = DUAL_TOL * (1.0 + float(np.abs(mu).max()))
             judged = s != 0.0
             if (judged & (np.abs(rate) <= tol)).any():
                 return None  # a bound not pushed against: the minimum-norm rule decides
-            dual = DualCheck(n, W[:0], s[:0])  # nothing left undecided
-            bad = judged & (rate < -tol)
-            if bad.any():
-                dual.failed = True
-                dual.worst = int(np.argmin(np.where(judged, rate, np.inf)))
+            if (judged & (rate < -tol)).any():
+                release = int(np.argmin(np.where(judged, rate, np.inf)))
         stepper.reset()
         stepper.set_point(x)
         sizes = [eb[k][1] - eb[k][0] for k in levels]
@@ -764,7 +764,7 @@ class HierarchySolver:
         for k, m, f in zip(levels, sizes, full, strict=True):
             ranks[k] = m if f else n - used
             used += m
-        return ranks, dual
+        return ranks, release
 
     def _box_steps(
         self, st: _Structure, stepper: NullspaceStepper, dual: DualCheck | None
@@ -781,7 +781,7 @@ class HierarchySolver:
             return ranks
         blocks = st.box_blocks
         if blocks is None:
-            blocks = [[k] for k in levels]
+            blocks = [(k, k + 1) for k in levels]
         last = levels[-1]
         Aeq, fro, tol, n = st.Aeq, self._fro, self.rank_tol, self.n
         step = stepper.step
@@ -802,16 +802,16 @@ class HierarchySolver:
                 dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr)
             return r
 
-        for ks in blocks:
+        eq_sizes = [0] + [e1 - e0 for e0, e1, _, _ in eb[1:]]  # level 0: held by fixing
+        for k0, k1 in blocks:
+            ks = list(range(k0, k1))
             if len(ks) > 1 and one(ks, True) >= 0:
-                for k in ks:
-                    ranks[k] = eb[k][1] - eb[k][0]
+                ranks[k0:k1] = eq_sizes[k0:k1]
                 continue
             for k in ks:
                 ranks[k] = one([k], False)
-        full = [bool(ranks[k] == eb[k][1] - eb[k][0]) for k in levels]
-        st.box_blocks = _merge_runs(levels, full)
-        st.box_full = full
+        st.box_blocks = _plan_blocks(eq_sizes, ranks)
+        st.box_full = [bool(ranks[k] == eq_sizes[k]) for k in levels]
         return ranks
 
     def _qp_level(
@@ -1068,23 +1068,6 @@ def _plan_blocks(sizes, ranks) -> list[tuple[int, int]]:
         blocks.append((k, k + 1))
     if run >= 0:
         blocks.append((run, len(sizes)))
-    return blocks
-
-
-def _merge_runs(levels: list[int], full: list[bool]) -> list[list[int]]:
-    """Runs of consecutive full-rank levels as one block, the others alone."""
-    blocks: list[list[int]] = []
-    run: list[int] = []
-    for k, f in zip(levels, full, strict=True):
-        if f:
-            run.append(k)
-            continue
-        if run:
-            blocks.append(run)
-            run = []
-        blocks.append([k])
-    if run:
-        blocks.append(run)
     return blocks
 
 
