@@ -34,6 +34,7 @@ __all__ = [
     "REACH_ROBOTS",
     "ROBOT_DEMO_DEFAULTS",
     "TORQUE_STRATEGIES",
+    "Pacer",
     "finite_float",
     "positive_float",
     "reach_options",
@@ -47,6 +48,34 @@ __all__ = [
     "torque_talos_options",
     "torque_talos_run",
 ]
+
+
+class Pacer:
+    """Real-time pacing of a demo loop: ``wait(k)`` sleeps until tick ``k``'s deadline
+    ``start + k dt`` (absolute, so no drift) and counts the ticks that ended more than
+    one ``dt`` after it (:attr:`late`). ``sleep`` is injectable for tests."""
+
+    def __init__(self, dt: float, sleep: Any = None) -> None:
+        import time
+
+        self._clock = time.perf_counter
+        self._sleep = time.sleep if sleep is None else sleep
+        self.dt = dt
+        self.late = 0
+        self.start = self._clock()
+
+    def wait(self, k: int) -> None:
+        """Wait for the deadline of tick ``k`` (counted from the construction)."""
+        left = self.start + k * self.dt - self._clock()
+        if left > 0:
+            self._sleep(left)
+        elif left < -self.dt:
+            self.late += 1
+
+    def elapsed(self) -> float:
+        """Seconds since the construction."""
+        return self._clock() - self.start
+
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
 ROBOT_DEMO_DEFAULTS: dict[str, Any] = {"robot": "talos", "duration": 3.0, "dt": 1e-3}

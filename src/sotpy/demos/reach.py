@@ -74,6 +74,7 @@ import pinocchio as pin
 
 from ..errors import RobotError, SotpyError
 from ..graph import plug, pool
+from . import Pacer
 
 __all__ = [
     "COM_TOLERANCE",
@@ -394,7 +395,6 @@ def run_reach(
 
     view = None
     url = pid = None
-    late = 0
     wall = 0.0
     try:
         if viewer:
@@ -418,7 +418,7 @@ def run_reach(
         for i, text in enumerate(levels):
             emit(f"  level {i}: {text}")
         record(0)
-        start_clock = time.perf_counter()
+        pacer = Pacer(dt, sleep)
         for k in range(1, steps + 1):
             device.increment(dt)
             res = sot.lastResult
@@ -426,12 +426,9 @@ def run_reach(
             methods.append(res.method)
             record(k)
             if view is not None:
-                left = start_clock + k * dt - time.perf_counter()
-                if left > 0:
-                    sleep(left)
-                elif left < -dt:
-                    late += 1
-        wall = time.perf_counter() - start_clock
+                pacer.wait(k)
+        wall = pacer.elapsed()
+        late = pacer.late
         if view is not None:
             view.flush(1.0)
     finally:

@@ -64,6 +64,7 @@ import pinocchio as pin
 
 from ..errors import CommandError, EntityError, SotpyError
 from ..graph import VECTOR, Entity, Output, command, plug, pool
+from . import Pacer
 
 __all__ = [
     "DEFAULT_AMPLITUDE",
@@ -612,7 +613,6 @@ def run_robot_tour(
 
     view = None
     url = pid = None
-    late = 0
     wall = 0.0
     try:
         if viewer:
@@ -639,7 +639,7 @@ def run_robot_tour(
             emit(f"{t:7d} {values[0]:7.3f}  {_xyz(values[1:4])}  {_xyz(values[4:7])}")
 
         row(t0, record(t0))
-        start = time.perf_counter()
+        pacer = Pacer(dt, sleep)
         for k in range(1, steps + 1):
             device.increment(dt)
             t = t0 + k
@@ -648,12 +648,9 @@ def run_robot_tour(
                 if k % every == 0 or k == steps:
                     row(t, values)
             if view is not None:
-                left = start + k * dt - time.perf_counter()
-                if left > 0:
-                    sleep(left)
-                elif left < -dt:
-                    late += 1
-        wall = time.perf_counter() - start
+                pacer.wait(k)
+        wall = pacer.elapsed()
+        late = pacer.late
         if view is not None:
             view.flush(1.0)
     finally:
