@@ -35,6 +35,8 @@ __all__ = [
     "ROBOT_DEMO_DEFAULTS",
     "TORQUE_STRATEGIES",
     "Pacer",
+    "attach_viewer",
+    "detach_viewer",
     "finite_float",
     "positive_float",
     "reach_options",
@@ -75,6 +77,27 @@ class Pacer:
     def elapsed(self) -> float:
         """Seconds since the construction."""
         return self._clock() - self.start
+
+
+def attach_viewer(robot: Any, prefix: str) -> Any:
+    """A ``RobotViewer`` named ``<prefix>_viewer`` on ``robot``'s models, fed by its
+    device's state and refreshed every 20 ticks by the device's ``after`` calls; close
+    it with :func:`detach_viewer`."""
+    from ..graph import plug
+    from ..viewer import RobotViewer
+
+    view = RobotViewer(
+        f"{prefix}_viewer", robot.model, robot.visual_model, robot.collision_model, period=20
+    )
+    plug(robot.device.state, view.state)
+    robot.device.after.addSignal(view.display)
+    return view
+
+
+def detach_viewer(robot: Any, view: Any) -> None:
+    """Stop feeding ``view`` and close it (its server process ends)."""
+    robot.device.after.rmSignal(view.display, missing_ok=True)
+    view.close()
 
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).

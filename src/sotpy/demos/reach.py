@@ -74,7 +74,7 @@ import pinocchio as pin
 
 from ..errors import RobotError, SotpyError
 from ..graph import plug, pool
-from . import Pacer
+from . import Pacer, attach_viewer, detach_viewer
 
 __all__ = [
     "COM_TOLERANCE",
@@ -398,14 +398,8 @@ def run_reach(
     wall = 0.0
     try:
         if viewer:
-            from ..viewer import RobotViewer
-
-            view = RobotViewer(
-                f"{prefix}_viewer", model, r.visual_model, r.collision_model, period=20
-            )
+            view = attach_viewer(r, prefix)
             entities.append(view.name)
-            plug(device.state, view.state)
-            device.after.addSignal(view.display)
             url = view.url()
             proc = view.serverProcess
             pid = None if proc is None else proc.pid
@@ -433,8 +427,7 @@ def run_reach(
             view.flush(1.0)
     finally:
         if view is not None:
-            device.after.rmSignal(view.display, missing_ok=True)
-            view.close()
+            detach_viewer(r, view)
 
     # checks
     times = np.arange(n1) * dt

@@ -64,7 +64,7 @@ import pinocchio as pin
 
 from ..errors import CommandError, EntityError, SotpyError
 from ..graph import VECTOR, Entity, Output, command, plug, pool
-from . import Pacer
+from . import Pacer, attach_viewer, detach_viewer
 
 __all__ = [
     "DEFAULT_AMPLITUDE",
@@ -616,14 +616,8 @@ def run_robot_tour(
     wall = 0.0
     try:
         if viewer:
-            from ..viewer import RobotViewer
-
-            view = RobotViewer(
-                f"{prefix}_viewer", r.model, r.visual_model, r.collision_model, period=20
-            )
+            view = attach_viewer(r, prefix)
             entities.append(view.name)
-            plug(device.state, view.state)
-            device.after.addSignal(view.display)
             url = view.url()
             proc = view.serverProcess
             pid = None if proc is None else proc.pid
@@ -655,8 +649,7 @@ def run_robot_tour(
             view.flush(1.0)
     finally:
         if view is not None:
-            device.after.rmSignal(view.display, missing_ok=True)
-            view.close()
+            detach_viewer(r, view)
 
     t_end = t0 + steps
     q_end = device.state(t_end)
