@@ -2,7 +2,14 @@
 hand and posture tasks, torque limits. Prints the median per tick and a breakdown:
 dynamics (Pinocchio passes), QP (rows + solve), graph (the rest of the entity tick).
 
-    /tmp/venv/bin/python benchmarks/bench_wbc.py [--ticks 300] [--strategy ...]
+With the one-level weighted strategy it then compares, in the same run and on the same
+ticks (the variants take turns every 25 ticks of one simulation), the QP solve of
+:class:`sotpy.solvers.wbc.qp.WeightedQP` as used (compiled kernels, last tick's active
+set tried first), its NumPy twin (``jit=False``), and DAQP on every tick (the guess
+dropped before each solve: the previous implementation's path), with each variant's
+median controller tick and its ratio to the DAQP-every-tick reference.
+
+    python benchmarks/bench_wbc.py [--ticks 300] [--strategy ...]
 """
 
 from __future__ import annotations
@@ -76,6 +83,40 @@ def main() -> None:
     print(f"  QP (rows + solve) {qp:.3f}   (rows {rows:.3f}, solve {qp - rows:.3f})")
     print(f"  graph + rest      {tick - dyn - qp:.3f}")
     print(f"  solution found    {ctrl.solutionFound.value}")
+    if args.strategy == "OneLevelWeighted":
+        compare_variants(ctrl, dev, args.ticks)
+
+
+def compare_variants(ctrl, dev, ticks: int, chunk: int = 25) -> None:
+    """Interleaved turns of the QP variants on one simulation (see the module doc)."""
+    from sotpy.solvers.wbc import _kernels
+    from sotpy.solvers.wbc.qp import WeightedQP
+
+    core = ctrl.core
+    make = lambda jit: WeightedQP(core.robot.actuated, core._unactuated, jit=jit)  # noqa: E731
+    variants = {"compiled + guess": make(None), "NumPy + guess": make(False)}
+    if _kernels.reduce is None:
+        del variants["compiled + guess"]
+    variants["DAQP every tick (reference)"] = make(False)
+    times: dict[str, list[float]] = {k: [] for k in variants}
+    for _ in range(max(1, ticks // chunk)):
+        for name, qp in variants.items():
+            core.weighted_qp = qp
+            reference = name.startswith("DAQP")
+            for _ in range(chunk):
+                if reference:
+                    qp.forget()
+                t0 = time.perf_counter()
+                dev.increment(0.001)
+                times[name].append(time.perf_counter() - t0)
+            if not ctrl.solutionFound.value:
+                raise SystemExit(f"{name}: no solution ({core.last.reason})")
+    ref = float(np.median(times["DAQP every tick (reference)"]))
+    print("\nQP variants, interleaved (device step incl. the simulation, median ms):")
+    for name, qp in variants.items():
+        m = float(np.median(times[name]))
+        hits = qp.guess_hits / max(1, qp.guess_hits + qp.daqp_solves)
+        print(f"  {name:30s} {1e3 * m:.3f}   ratio {m / ref:.2f}   guess answered {hits:.0%}")
 
 
 if __name__ == "__main__":

@@ -60,9 +60,9 @@ _LOCAL = pin.LOCAL
 
 def dynamics_rows(robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
     """``(A, c)`` with ``A chi = c`` the equations of motion ``M a + b = S^T tau + J^T f``."""
-    A = np.zeros((layout.nv, layout.n))
+    A = np.empty((layout.nv, layout.n))
     A[:, layout.a] = robot.M
-    A[:, layout.tau] = -robot.S.T
+    A[:, layout.tau] = robot.minus_St
     for c in layout.contacts:
         A[:, layout.f[c.key]] = -robot.contact_jacobian(c).T
     return A, -robot.b
@@ -143,12 +143,18 @@ class JointTorqueLimit(Constraint):
             eff if upper is None else upper,
             robot.na,
         )
+        self._rows: tuple | None = None
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        keep = np.flatnonzero(_keep(self.lower, self.upper))
-        C = np.zeros((len(keep), layout.n))
-        C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
-        return C, _clip(self.lower[keep]), _clip(self.upper[keep])
+        # constant rows: rebuilt only when the layout or the bounds change
+        key = (layout, self.lower.tobytes(), self.upper.tobytes())
+        if self._rows is None or self._rows[0] != key:
+            keep = np.flatnonzero(_keep(self.lower, self.upper))
+            C = np.zeros((len(keep), layout.n))
+            C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
+            self._rows = (key, C, _clip(self.lower[keep]), _clip(self.upper[keep]))
+        _, C, lo, hi = self._rows
+        return C.copy(), lo.copy(), hi.copy()
 
 
 class JointAccelerationLimit(Constraint):
@@ -266,8 +272,44 @@ class ContactConstraint(Constraint):
         super().__init__(name)
         self.states: dict[str, ContactState] = {}
         self._friction: dict[ContactSpec, tuple[np.ndarray, np.ndarray]] = {}  # constant
+        self._template: tuple | None = None  # (layout, C, lb, ub, slots): all active
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if all(self._state(c) == "active" for c in layout.contacts):
+            return self._active_rows(robot, layout)
+        return self._general_rows(robot, layout)
+
+    def _state(self, c: ContactSpec) -> str:
+        st = self.states.get(c.key)
+        return "active" if st is None else st.state
+
+    def _active_rows(
+        self, robot: RobotModel, layout: Layout
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every contact active: the rows of :meth:`_general_rows`, from a template built
+        once per layout (friction rows are constant) with the Jacobians and drifts
+        written in place."""
+        cache = self._template
+        if cache is None or cache[0] is not layout:
+            C, lb, ub = self._general_rows(robot, layout)
+            slots, r = [], 0
+            for c in layout.contacts:
+                slots.append((c, r, r + c.dim))
+                r += c.dim if c.bilateral else c.dim + len(self._friction[c][1])
+            cache = self._template = (layout, C, lb, ub, slots)
+            return C.copy(), lb.copy(), ub.copy()
+        _, C, lb, ub, slots = cache
+        a = layout.a
+        for c, r0, r1 in slots:
+            C[r0:r1, a] = robot.contact_jacobian(c)
+            drift = robot.contact_drift(c)
+            np.negative(drift, out=lb[r0:r1])
+            np.negative(drift, out=ub[r0:r1])
+        return C.copy(), lb.copy(), ub.copy()
+
+    def _general_rows(
+        self, robot: RobotModel, layout: Layout
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         blocks, lbs, ubs = [], [], []
         for c in layout.contacts:
             st = self.states.get(c.key)

@@ -155,7 +155,11 @@ class RobotModel:
         self.na = len(self.actuated)
         self.S = np.zeros((self.na, self.nv))
         self.S[np.arange(self.na), self.actuated] = 1.0
+        self.minus_St = -self.S.T  # the torque columns of the equations of motion
         self._a0 = np.zeros(self.nv)
+        self._strict_lower = np.tril(np.ones((self.nv, self.nv), dtype=bool), -1)
+        self._g: np.ndarray | None = None
+        self._gdata: pin.Data | None = None
         self.dt = 0.001  # the control period of the tick (s), set by the controller
         self.mass = float(pin.computeTotalMass(model))
         self._fids: dict[str, int] = {}  # frame name -> id (the model is fixed)
@@ -189,20 +193,32 @@ class RobotModel:
                 f"RobotModel.update: expected q of size {self.nq} and v of size {self.nv},"
                 f" got {q.shape} and {v.shape}"
             )
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+        if not (np.isfinite(q).all() and np.isfinite(v).all()):
             raise SotpyError("RobotModel.update: q or v is not finite")
         m, d = self.model, self.data
         pin.computeAllTerms(m, d, q, v)  # M (upper), nle, joint Jacobians, com, Jcom
         pin.forwardKinematics(m, d, q, v, self._a0)  # data.v, data.a at a = 0: drifts
         pin.updateFramePlacements(m, d)
-        pin.computeGeneralizedGravity(m, d, q)
         pin.centerOfMass(m, d, q, v, self._a0, False)  # vcom, acom (a = 0: dJcom v)
-        M = d.M
-        self.M = np.triu(M) + np.triu(M, 1).T
+        M = d.M.copy()
+        np.copyto(M, M.T, where=self._strict_lower)  # Pinocchio fills the upper triangle
+        self.M = M
         self.b = d.nle.copy()
-        self.g = d.g.copy()
+        self._g = None
         self.q = q.copy()
         self.v = v.copy()
+
+    @property
+    def g(self) -> np.ndarray:
+        """Generalised gravity ``g(q)`` (nv, N m or N) at the last :meth:`update`,
+        computed on first use (a fallback or a removed-gravity command needs it)."""
+        if self._g is None:
+            if self.q is None:
+                raise SotpyError("RobotModel.g: the robot state was never set (update(q, v))")
+            if self._gdata is None:  # its own data: the tick's kinematics stay untouched
+                self._gdata = pin.Data(self.model)
+            self._g = pin.computeGeneralizedGravity(self.model, self._gdata, self.q).copy()
+        return self._g
 
     # -- frames -------------------------------------------------------------------------
     def frame_placement(self, fid: int) -> pin.SE3:

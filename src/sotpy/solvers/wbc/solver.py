@@ -5,10 +5,11 @@ of :mod:`.tasks` and the constraints ``lb <= C chi <= ub`` of :mod:`.constraints
 (every constraint that is not inactive), and the equations of motion
 ``A_dyn chi = c_dyn`` (``M a - S^T tau - J^T f = -b``):
 
-``"OneLevelWeighted"`` (ORCA's weighted prioritisation): one dense QP solved by DAQP
-(dual active set: equalities and active constraints hold to rounding), over
+``"OneLevelWeighted"`` (ORCA's weighted prioritisation): one dense QP over
 ``y = (a, f)`` with the torques eliminated by the actuated rows of the dynamics (the
-same optimum, fewer variables; see ``_weighted``)::
+same optimum, fewer variables), solved by one KKT solve on the previous tick's active
+set when that is verified optimal, else by DAQP (dual active set); either way
+equalities and active constraints hold to rounding (:mod:`.qp`)::
 
     min_chi  sum_k ||W_k^(1/2) (E_k chi - f_k)||^2 + eps ||chi||^2
     s.t.     A_dyn chi = c_dyn,   lb <= C chi <= ub
@@ -58,6 +59,7 @@ from .constraints import (
     dynamics_rows,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
+from .qp import WeightedQP
 from .tasks import Task
 
 __all__ = ["STRATEGIES", "Solution", "WholeBodyController"]
@@ -112,6 +114,7 @@ class WholeBodyController:
         self.setStrategy(strategy)
         self.setRegularisation(regularisation)
         self.hierarchy = HierarchySolver()
+        self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
         self.last: Solution | None = None
         self.last_dynamics: tuple[np.ndarray, np.ndarray] | None = None
         self.last_constraints: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -290,7 +293,7 @@ class WholeBodyController:
             if task.state == "inactive":
                 continue
             w = task.row_weight_vector()
-            if not np.any(w > 0):
+            if not w.any():  # w >= 0: no row counts
                 continue
             E, f = task.rows(robot, layout)
             tasks.append((task.level, E, f, w))
@@ -336,73 +339,18 @@ class WholeBodyController:
         return self._split(chi, False, reason, res)
 
     # -- strategies -----------------------------------------------------------------------------
-    def _torque_elimination(self, dyn) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``chi = T y + t0`` with ``y = (a, f)``: the actuated rows of the equations of
-        motion give ``tau = M_r a + b_r - J_r^T f`` (``r`` the actuated velocities), so
-        only the unactuated rows ``(A_u, c_u)`` remain as equalities (6 with a free
-        flyer, none for a fixed base). Returns ``(T, t0, A_u y-matrix, c_u)``."""
-        L, robot = self.layout, self.robot
-        A, c = dyn
-        nv, na, nf = L.nv, L.na, L.nf
-        r = robot.actuated
-        T = np.zeros((L.n, nv + nf))
-        T[np.arange(nv), np.arange(nv)] = 1.0
-        T[L.tau, :nv] = A[r, :nv]
-        T[L.tau, nv:] = A[r, nv + na :]
-        T[nv + na + np.arange(nf), nv + np.arange(nf)] = 1.0
-        t0 = np.zeros(L.n)
-        t0[L.tau] = -c[r]
-        u = self._unactuated
-        Au = np.concatenate([A[u, :nv], A[u, nv + na :]], axis=1)
-        return T, t0, Au, c[u]
-
     def _weighted(self, dyn, cons, tasks) -> tuple[np.ndarray | None, bool, str]:
         """One QP over ``y = (a, f)``, the torques eliminated through the actuated rows of
-        the equations of motion (:meth:`_torque_elimination`): the same optimum as over
-        ``chi`` with the dynamics as an equality (an exact elimination; the objective,
-        regularisation included, and the constraints are those of ``chi = T y + t0``),
-        with 82 -> 50 variables and 38 -> 6 equalities on Talos (DAQP's set-up, a
-        factorisation of the Hessian, dominates its time)."""
-        import daqp
-
-        n = self.layout.n
-        H = self.regularisation * np.eye(n)
-        g = np.zeros(n)
-        for _lvl, E, f, w in tasks:
-            EW = E.T * w
-            H += EW @ E
-            g -= EW @ f
-        T, t0, Au, cu = self._torque_elimination(dyn)
-        HT = H @ T
-        Hy = T.T @ HT
-        gy = T.T @ (g + H @ t0)
-        Cy = cons[0] @ T
-        Ct0 = cons[0] @ t0
-        lo = np.concatenate([cu, cons[1] - Ct0])
-        hi = np.concatenate([cu, cons[2] - Ct0])
-        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
-            return None, False, "NaN in the constraint bounds"
-        if np.any(lo > hi + 1e-12):
-            return None, False, "a constraint has lower > upper (infeasible bounds)"
-        big = 1e30
-        lo = np.where(np.isfinite(lo), lo, -big)
-        hi = np.where(np.isfinite(hi), hi, big)
-        sense = np.zeros(len(lo), dtype=np.int32)
-        sense[: len(cu)] = 5  # equality (active, immutable)
-        y, _fval, flag, _info = daqp.solve(
-            np.ascontiguousarray(Hy), gy, np.ascontiguousarray(np.vstack([Au, Cy])), hi, lo, sense
-        )
-        if flag not in (1, 2):
-            names = {
-                -1: "infeasible",
-                -2: "cycling",
-                -3: "unbounded",
-                -4: "iteration limit",
-                -5: "non-convex",
-                -6: "overdetermined initial active set",
-            }
-            return None, False, f"QP {names.get(flag, 'failed')} (DAQP exit flag {flag})"
-        x = T @ np.asarray(y, dtype=float) + t0
+        the equations of motion (:mod:`.qp`): the same optimum as over ``chi`` with the
+        dynamics as an equality (82 -> 50 variables and 38 -> 6 equalities on Talos),
+        the previous tick's active set tried first, DAQP otherwise. The answer is
+        checked against the constraints over ``chi`` before it is used."""
+        qp = self.weighted_qp
+        x, reason = qp.solve(self.layout, dyn, cons, tasks, self.regularisation)
+        if x is None:
+            return None, False, reason
+        if qp.last_method == "guess":
+            return x, True, ""  # optimality and feasibility verified (see .qp)
         A = dyn[0]
         viol = max(
             float(np.max(np.abs(A @ x - dyn[1]), initial=0.0)),
