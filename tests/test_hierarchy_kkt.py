@@ -1,6 +1,8 @@
 """The one-KKT-solve path (sotpy.solvers._kkt): used when every level but the last is of
 full row rank (the usual SOT tick), checked against the independent references, and
-refused (the null-space recursion answers) when the system is ill-conditioned."""
+refused (the null-space recursion answers) when the system is ill-conditioned. For
+equality-only stacks it belongs to the NumPy path (``jit=False``); on the box path it is
+used either way."""
 
 from __future__ import annotations
 
@@ -45,7 +47,8 @@ def test_equality_stacks_of_the_usual_shape_use_one_kkt_solve(seed, with_last, k
     n = int(rng.integers(12, 30))
     levels = full_rank_stack(rng, n, with_last)
     x_ref, optimal = projector_hierarchy(levels)
-    solver = HierarchySolver()
+    # the NumPy path (the compiled equality path has no KKT shortcut: it is faster)
+    solver = HierarchySolver(jit=False)
     first = solver.solve(levels)  # null-space recursion, learns the shape
     assert kkt_calls["ok"] == 0
     second = solver.solve(levels)
@@ -65,7 +68,7 @@ def test_ill_conditioned_upper_level_is_left_to_the_null_space_path(kkt_calls):
     rng = np.random.default_rng(5)
     n = 10
     levels = full_rank_stack(rng, n)
-    solver = HierarchySolver()
+    solver = HierarchySolver(jit=False)
     solver.solve(levels)  # the shape: full-rank uppers, a least-squares last level
     A, b = levels[0]
     A = np.vstack([A, A[0] + 1e-12 * rng.standard_normal(n)])

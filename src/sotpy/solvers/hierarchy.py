@@ -82,6 +82,7 @@ import numpy as np
 from sotpy._blas import limit_blas_threads
 from sotpy.errors import SolverError
 
+from . import _eqkernel
 from ._boxset import DUAL_TOL, BoxActiveSet, DualCheck
 from ._cascade import DaqpQP, ProxQP, daqp_available
 from ._equality import NullspaceStepper
@@ -216,6 +217,7 @@ class _Structure:
         "sizes",
         "slices",
         "starts",
+        "starts64",
         "up",
         "upin",
         "warm",
@@ -245,6 +247,9 @@ class HierarchySolver:
             non-finite matrices and ``lower <= upper``). Non-finite values that reach
             the solution are reported either way.
         max_iter: iteration limit of each QP.
+        jit: run the equality recursion as one compiled call (:mod:`._eqkernel`, the
+            same LAPACK arithmetic; ``None``: when numba is available and
+            ``SOTPY_JIT`` is not ``0``).
     """
 
     def __init__(
@@ -259,6 +264,7 @@ class HierarchySolver:
         check: bool = True,
         max_iter: int = 1000,
         active_set: bool = True,
+        jit: bool | None = None,
     ):
         if backend not in _BACKENDS:
             raise SolverError(f"HierarchySolver: backend {backend!r} is not one of {_BACKENDS}")
@@ -280,6 +286,12 @@ class HierarchySolver:
         self.active_set = bool(active_set)
         self.check = bool(check)
         self.max_iter = int(max_iter)
+        if jit and _eqkernel.equality_stack is None:
+            raise SolverError(
+                "HierarchySolver: jit=True but compiled kernels are unavailable"
+                " (numba missing or SOTPY_JIT=0)"
+            )
+        self.jit = _eqkernel.equality_stack is not None if jit is None else bool(jit)
         self._stepper: NullspaceStepper | None = None
         self._structure: _Structure | None = None
         self._qp_class = DaqpQP if backend == "daqp" else ProxQP
@@ -308,6 +320,11 @@ class HierarchySolver:
             damping = self.damping
         st, parsed = self._prepare(levels)
         lams = _dampings(damping, len(st.sizes))
+        if st.all_eq and self.jit:
+            result = self._equality_compiled(st, parsed, lams)
+            if result is not None:
+                return result
+            self._fro = _frobenius(st, self.n)  # a non-finite entry: the NumPy path
         stepper = self._stepper
         if stepper is None or stepper.m_max < st.m_max:
             stepper = self._stepper = NullspaceStepper(self.n, st.m_max)
@@ -395,21 +412,12 @@ class HierarchySolver:
                 s, e = starts[k], starts[k + 1]
                 A_st[s:e, :n] = A
                 np.negative(lo, out=A_st[s:e, n])
-        # Frobenius norm of every level (the scale of its rank threshold)
-        if len(st.nonempty) == len(sizes):
-            An = A_st[:, :n]
-            fro2 = np.add.reduceat(np.einsum("ij,ij->i", An, An), st.nonempty_starts)
-            fro = np.sqrt(fro2)
-        else:
-            fro = np.zeros(len(sizes))
-            fro2 = fro
-            if len(st.nonempty):
-                An = A_st[:, :n]
-                fro2 = np.add.reduceat(np.einsum("ij,ij->i", An, An), st.nonempty_starts)
-                fro[st.nonempty] = np.sqrt(fro2)
-        if self.check and not math.isfinite(float(fro2.sum())):
-            _raise_nonfinite_matrix(parsed)
-        self._fro = fro
+        # Frobenius norm of every level (the scale of its rank threshold); the compiled
+        # equality path computes it (and checks it) itself
+        if general or not self.jit:
+            fro = self._fro = _frobenius(st, n)
+            if self.check and not math.isfinite(float(fro.sum())):
+                _raise_nonfinite_matrix(parsed)
         if general:
             d = st.d
             with np.errstate(invalid="ignore"):  # inf - inf: reported below
@@ -430,6 +438,7 @@ class HierarchySolver:
         for m in sizes:
             starts.append(starts[-1] + m)
         st.starts = starts
+        st.starts64 = np.array(starts, dtype=np.int64)
         st.slices = [slice(starts[k], starts[k + 1]) for k in range(len(sizes))]
         mtot = starts[-1]
         st.A = np.zeros((mtot, n + 1))
@@ -495,10 +504,16 @@ class HierarchySolver:
         """All rows are equalities: the null-space recursion, undamped levels known to be
         of full row rank (from the previous call) factored together."""
         sizes, slices, A_st = st.sizes, st.slices, st.A
-        ranks = np.zeros(len(sizes), dtype=np.intp)
         fro = self._fro
         tol = self.rank_tol
         last = st.last
+        if self.jit:
+            ranks = self._compiled_steps(A_st, st.starts64, st.blocks, lams, last, stepper)
+            undamped = [r if lam == 0.0 else -1 for r, lam in zip(ranks, lams, strict=True)]
+            st.blocks = _plan_blocks(sizes, undamped)
+            st.eq_full = [bool(ranks[k] == sizes[k]) for k in st.nonempty] or None
+            return ranks
+        ranks = np.zeros(len(sizes), dtype=np.intp)
         step = stepper.step
         for k0, k1 in st.blocks:
             if stepper.nf == 0:
@@ -521,6 +536,49 @@ class HierarchySolver:
         st.blocks = _plan_blocks(sizes, undamped)
         st.eq_full = [bool(ranks[k] == sizes[k]) for k in st.nonempty] or None
         return ranks
+
+    def _equality_compiled(self, st: _Structure, parsed, lams: list[float]):
+        """The equality path as one compiled call (:func:`._eqkernel.equality_all`):
+        norms, recursion, residuals and the next plan of merged blocks. ``None`` when a
+        matrix entry is not finite and ``check`` is off (the caller then takes the
+        NumPy path, which reports it)."""
+        ok, x, ranks, fro, res, plan = _eqkernel.equality_all(
+            st.A,
+            st.starts64,
+            np.asarray(st.blocks, dtype=np.int64).reshape(-1, 2),
+            np.array(lams, dtype=np.float64),
+            self.rank_tol,
+            st.last,
+        )
+        if not ok:
+            if self.check:
+                _raise_nonfinite_matrix(parsed)
+            return None
+        self._fro = fro
+        st.blocks = plan
+        out = HierarchyResult(x, res, ranks, "equality", (), 0, True, fro, self.eps)
+        if not math.isfinite(out.xnorm + float(res.sum())):
+            _raise_nonfinite_matrix(parsed)
+            raise SolverError(
+                "solve_hierarchy: the solution is not finite (overflow: is the stack scaled?)"
+            )
+        return out
+
+    def _compiled_steps(self, A, starts64, blocks, lams, last, stepper) -> np.ndarray:
+        """The equality recursion over the levels of ``A`` (rows ``starts64[k]:
+        starts64[k + 1]``, blocks of full-rank levels stepped together) as one compiled
+        call; the point lands in ``stepper`` (whose basis is then stale)."""
+        x, ranks = _eqkernel.equality_stack(
+            A,
+            starts64,
+            np.array(blocks, dtype=np.int64).reshape(-1, 2),
+            self._fro,
+            np.array(lams, dtype=np.float64),
+            self.rank_tol,
+            last,
+        )
+        stepper.set_point(x)
+        return ranks.astype(np.intp)
 
     def _kkt_equality(self, st: _Structure, stepper: NullspaceStepper) -> np.ndarray | None:
         """The equality stack as one KKT solve when its shape allows (see :mod:`._kkt`):
@@ -608,9 +666,14 @@ class HierarchySolver:
             # the whole stack's equality rows; if the point satisfies every inequality
             # row it is the answer (tried first when it was so at the previous call)
             last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
-            for k, (e0, e1, _, _) in enumerate(st.eq_bounds):
-                if e1 > e0 and stepper.nf > 0:
-                    ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lams[k], k != last)
+            if self.jit and len(Aeq):
+                eq_starts = np.array([b[0] for b in st.eq_bounds] + [len(Aeq)], dtype=np.int64)
+                blocks = [(k, k + 1) for k, b in enumerate(st.eq_bounds) if b[1] > b[0]]
+                ranks[:] = self._compiled_steps(Aeq, eq_starts, blocks, lams, last, stepper)
+            else:
+                for k, (e0, e1, _, _) in enumerate(st.eq_bounds):
+                    if e1 > e0 and stepper.nf > 0:
+                        ranks[k] = stepper.step(Aeq[e0:e1], fro[k], tol, lams[k], k != last)
             v = Ain @ x_aug
             if (v >= lo_adj - eps).all() and (v <= hi_adj + eps).all():
                 return self._result(st, parsed, x_aug, ranks, "shortcut", (), 0, True)
@@ -1048,6 +1111,16 @@ def solve_hierarchy(
 
 
 # ------------------------------------------------------------------- helpers
+def _frobenius(st: _Structure, n: int) -> np.ndarray:
+    """The Frobenius norm of every level's matrix (the scale of its rank threshold)."""
+    fro = np.zeros(len(st.sizes))
+    if len(st.nonempty):
+        An = st.A[:, :n]
+        fro2 = np.add.reduceat(np.einsum("ij,ij->i", An, An), st.nonempty_starts)
+        fro[st.nonempty] = np.sqrt(fro2)
+    return fro
+
+
 def _plan_blocks(sizes, ranks) -> list[tuple[int, int]]:
     """Runs of consecutive non-empty levels of full row rank become one block."""
     blocks: list[tuple[int, int]] = []

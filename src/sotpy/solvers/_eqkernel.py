@@ -1,0 +1,287 @@
+"""The equality recursion of :class:`._equality.NullspaceStepper` as one compiled call
+(internal to ``sotpy.solvers``; see :mod:`sotpy._jit`).
+
+:func:`equality_stack` runs the null-space recursion over a whole stack of equality
+levels with the same LAPACK routines and the same arithmetic as
+:meth:`NullspaceStepper.step` (``dgeqp3`` of ``M^T``, the rank from ``|R_ii|``, the step
+by ``dtrtrs`` or ``dgels``, ``Z`` updated by ``dormqr``; the least-squares last level
+from a pivoted QR of ``M``), reached from numba through the addresses that
+``scipy.linalg.cython_lapack`` exports, so the calls cost no Python. Blocks of
+consecutive levels known to be of full row rank are stepped together, as by
+:meth:`HierarchySolver._solve_equality`. ``None`` when compiled kernels are disabled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import ENABLED
+
+equality_stack = None
+equality_all = None
+
+if ENABLED:  # pragma: no branch - the environment decides
+    import llvmlite.binding as _llvm
+    import numba as _nb
+    from numba import types as _t
+    from numba.extending import get_cython_function_address as _address
+
+    def _external(name: str, nargs: int):
+        symbol = f"sotpy_lapack_{name}"
+        _llvm.add_symbol(symbol, _address("scipy.linalg.cython_lapack", name))
+        return _t.ExternalFunction(symbol, _t.void(*([_t.voidptr] * nargs)))
+
+    _dgeqp3 = _external("dgeqp3", 9)
+    _dormqr = _external("dormqr", 13)
+    _dtrtrs = _external("dtrtrs", 10)
+    _dgels = _external("dgels", 11)
+
+    _R, _L, _N, _T, _U = ord("R"), ord("L"), ord("N"), ord("T"), ord("U")
+
+    @_nb.njit(cache=True, nogil=True)
+    def _geqp3(a, jpvt, tau, work, iw):  # pragma: no cover - compiled
+        """Pivoted QR in place of the Fortran array ``a``; ``jpvt`` 1-based."""
+        iw[0] = a.shape[0]
+        iw[1] = a.shape[1]
+        iw[2] = max(a.shape[0], 1)
+        iw[3] = work.shape[0]
+        jpvt[:] = 0
+        _dgeqp3(
+            iw[0:].ctypes, iw[1:].ctypes, a.ctypes, iw[2:].ctypes, jpvt.ctypes,
+            tau.ctypes, work.ctypes, iw[3:].ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
+        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
+        in the columns of the Fortran array ``refl``."""
+        ch[0] = side
+        ch[1] = trans
+        iw[0] = c.shape[0]
+        iw[1] = c.shape[1]
+        iw[2] = k
+        iw[3] = max(refl.shape[0], 1)
+        iw[5] = max(c.shape[0], 1)
+        iw[6] = work.shape[0]
+        _dormqr(
+            ch[0:].ctypes, ch[1:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes,
+            refl.ctypes, iw[3:].ctypes, tau.ctypes, c.ctypes, iw[5:].ctypes,
+            work.ctypes, iw[6:].ctypes, iw[7:].ctypes,
+        )  # fmt: skip
+        return iw[7]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _trtrs_upper(a, n, trans, b, iw, ch):  # pragma: no cover
+        """``op(U) z = b`` in place of ``b`` (length ``n``), ``U`` the upper triangle of
+        the leading ``n x n`` block of the Fortran array ``a``."""
+        ch[0] = _U
+        ch[1] = trans
+        ch[2] = _N
+        iw[0] = n
+        iw[1] = 1
+        iw[2] = max(a.shape[0], 1)
+        iw[3] = max(n, 1)
+        _dtrtrs(
+            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, iw[1:].ctypes,
+            a.ctypes, iw[2:].ctypes, b.ctypes, iw[3:].ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _gels(a, b, work, iw, ch):  # pragma: no cover
+        """Least squares ``min ||a z - b||`` (Fortran ``a``, full column rank), ``z`` in
+        ``b[:ncols]``."""
+        ch[0] = _N
+        iw[0] = a.shape[0]
+        iw[1] = a.shape[1]
+        iw[2] = 1
+        iw[3] = max(a.shape[0], 1)
+        iw[4] = max(b.shape[0], 1)
+        iw[5] = work.shape[0]
+        _dgels(
+            ch[0:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes, a.ctypes,
+            iw[3:].ctypes, b.ctypes, iw[4:].ctypes, work.ctypes, iw[5:].ctypes,
+            iw[6:].ctypes,
+        )  # fmt: skip
+        return iw[6]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _equality_stack(A, starts, blocks, fro, lams, rank_tol, last):  # pragma: no cover
+        n = A.shape[1] - 1
+        p = starts.shape[0] - 1
+        ranks = np.zeros(p, dtype=np.int64)
+        # W = [[Z, x], [0, 1]] (Fortran): Z = W[:n, c0:n], x = W[:n, n]
+        W = np.asfortranarray(np.eye(n + 1))
+        c0 = 0
+        nwork = 64 * (max(n, A.shape[0]) + 2)
+        work = np.empty(nwork)
+        iw = np.zeros(8, dtype=np.int32)
+        ch = np.zeros(3, dtype=np.uint8)
+        jpvt = np.zeros(max(n, A.shape[0]), dtype=np.int32)
+        tau = np.empty(max(n, 1))
+        for b in range(blocks.shape[0]):
+            k0 = blocks[b, 0]
+            k1 = blocks[b, 1]
+            nf = n - c0
+            if nf == 0:
+                break
+            merged = k1 - k0 > 1
+            for k in range(k0, k1):
+                if lams[k] != 0.0:
+                    merged = False  # the merge is exact only undamped
+            if merged:
+                s0, s1 = starts[k0], starts[k1]
+                scale = fro[k0]
+                for k in range(k0 + 1, k1):
+                    scale = min(scale, fro[k])
+                r = _step(A[s0:s1], W, c0, scale, rank_tol, 0.0, k1 - 1 != last, True,
+                          work, iw, ch, jpvt, tau)  # fmt: skip
+                if r >= 0:
+                    for k in range(k0, k1):
+                        ranks[k] = starts[k + 1] - starts[k]
+                    c0 += r
+                    continue
+            for k in range(k0, k1):
+                if n - c0 == 0:
+                    break
+                s0, s1 = starts[k], starts[k + 1]
+                if s1 == s0:
+                    continue
+                r = _step(A[s0:s1], W, c0, fro[k], rank_tol, lams[k], k != last, False,
+                          work, iw, ch, jpvt, tau)  # fmt: skip
+                ranks[k] = r
+                if k != last:
+                    c0 += r
+        return W[:n, n].copy(), ranks
+
+    @_nb.njit(cache=True, nogil=True)
+    def _step(
+        rows, W, c0, scale, rank_tol, lam, need, full_only, work, iw, ch, jpvt, tau
+    ):  # pragma: no cover
+        """One step of :meth:`NullspaceStepper.step` on ``W`` (see there). Returns the
+        rank, or -1 (nothing changed) when ``full_only`` and the rank is short. The
+        caller advances ``c0`` by the rank when ``need``."""
+        m = rows.shape[0]
+        n = W.shape[0] - 1
+        nf = n - c0
+        maug = np.ascontiguousarray((rows @ W)[:, c0:])  # [A Z | A x - b]
+        thr = rank_tol * scale
+        if not need and not full_only and m > nf and lam == 0.0:
+            # least squares from a pivoted QR of M itself
+            qr = np.asfortranarray(maug[:, :nf])
+            if _geqp3(qr, jpvt[:nf], tau[:nf], work, iw) == 0 and abs(qr[nf - 1, nf - 1]) > thr:
+                c = np.asfortranarray(maug[:, nf:])
+                _ormqr(_L, _T, qr, nf, tau[:nf], c, work, iw, ch)
+                y = np.ascontiguousarray(c[:nf, 0])
+                _trtrs_upper(qr, nf, _N, y, iw, ch)
+                v = np.zeros(nf)
+                for i in range(nf):
+                    v[jpvt[i] - 1] = y[i]
+                W[:, n] -= v @ W.T[c0:n]  # W[:, c0:n] @ v, C-contiguous operands
+                return nf
+        qr = np.asfortranarray(maug[:, :nf].T)  # nf x m
+        kmax = min(m, nf)
+        _geqp3(qr, jpvt[:m], tau[:kmax], work, iw)
+        r = 0
+        for i in range(kmax):
+            if abs(qr[i, i]) > thr:  # as the NumPy code: every |R_ii| above thr
+                r += 1
+        if full_only and r < m:
+            return -1
+        if r == 0:
+            return 0
+        refl = qr[:, :kmax]
+        ep = np.empty(m)
+        for i in range(m):
+            ep[i] = maug[jpvt[i] - 1, nf]
+        if r == m and lam == 0.0:
+            z = ep
+            _trtrs_upper(qr, m, _T, z, iw, ch)  # R^T z = ep
+        else:
+            rows_ls = m + r if lam > 0.0 else m
+            L = np.zeros((rows_ls, r), dtype=np.float64).T.copy().T  # Fortran
+            for j in range(r):
+                for i in range(j, m):
+                    L[i, j] = qr[j, i]  # L = R[:r, :m]^T (lower trapezoidal)
+            rhs = np.zeros(max(rows_ls, r))
+            rhs[:m] = ep
+            if lam > 0.0:
+                for j in range(r):
+                    L[m + j, j] = lam
+            _gels(L, rhs, work, iw, ch)
+            z = rhs[:r].copy()
+        if need:
+            zq = W[:, c0:n]
+            _ormqr(_R, _N, refl, kmax, tau[:kmax], zq, work, iw, ch)
+            W[:, n] -= z[:r] @ W.T[c0 : c0 + r]
+        else:
+            v = np.zeros((nf, 1)).T.copy().T
+            for i in range(r):
+                v[i, 0] = z[i]
+            _ormqr(_L, _N, refl, kmax, tau[:kmax], v, work, iw, ch)
+            W[:, n] -= np.ascontiguousarray(v[:, 0]) @ W.T[c0:n]
+        return r
+
+    @_nb.njit(cache=True, nogil=True)
+    def _equality_all(A, starts, blocks, lams, rank_tol, last):  # pragma: no cover
+        """The whole equality path: the Frobenius norm of each level (its rank scale),
+        the recursion, the residual ``||A_k x - b_k||`` of each level and the next plan
+        of blocks (runs of undamped full-rank levels, as ``hierarchy._plan_blocks``).
+        Returns ``(ok, x, ranks, fro, res, plan)``; ``ok`` False (nothing solved) when a
+        matrix entry is not finite."""
+        n = A.shape[1] - 1
+        p = starts.shape[0] - 1
+        fro = np.zeros(p)
+        total = 0.0
+        for k in range(p):
+            acc = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                for j in range(n):
+                    acc += A[i, j] * A[i, j]
+            fro[k] = np.sqrt(acc)
+            total += acc
+        if not np.isfinite(total):
+            return False, np.zeros(n), np.zeros(p, dtype=np.int64), fro, fro, blocks
+        x, ranks = _equality_stack(A, starts, blocks, fro, lams, rank_tol, last)
+        res = np.zeros(p)
+        for k in range(p):
+            acc = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                v = A[i, n]
+                for j in range(n):
+                    v += A[i, j] * x[j]
+                acc += v * v
+            res[k] = np.sqrt(acc)
+        plan = np.zeros((p, 2), dtype=np.int64)
+        nb = 0
+        run = -1
+        for k in range(p):
+            m = starts[k + 1] - starts[k]
+            if m == 0:
+                if run >= 0:
+                    plan[nb, 0] = run
+                    plan[nb, 1] = k
+                    nb += 1
+                    run = -1
+                continue
+            if ranks[k] == m and lams[k] == 0.0:
+                if run < 0:
+                    run = k
+                continue
+            if run >= 0:
+                plan[nb, 0] = run
+                plan[nb, 1] = k
+                nb += 1
+                run = -1
+            plan[nb, 0] = k
+            plan[nb, 1] = k + 1
+            nb += 1
+        if run >= 0:
+            plan[nb, 0] = run
+            plan[nb, 1] = p
+            nb += 1
+        return True, x, ranks, fro, res, plan[:nb].copy()
+
+    equality_stack = _equality_stack
+    equality_all = _equality_all

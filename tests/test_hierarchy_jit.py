@@ -1,0 +1,93 @@
+"""The compiled equality recursion (sotpy.solvers._eqkernel) against the NumPy
+NullspaceStepper path of the same solver (jit=False) and the projector reference, on
+the random stacks of test_hierarchy (rank-deficient, conflicting, dependent rows,
+over-determined last level), damped and undamped, and over drifting sequences in which
+the plan of merged blocks changes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reference_hierarchy import projector_hierarchy
+from sotpy.solvers import HierarchySolver, SolverError, _eqkernel
+from test_hierarchy import equality_stack, mixed_stack
+
+pytestmark = pytest.mark.skipif(
+    _eqkernel.equality_stack is None, reason="numba missing or SOTPY_JIT=0"
+)
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("damping", [0.0, 0.03])
+def test_compiled_equals_numpy_and_reference(seed, damping):
+    rng = np.random.default_rng(seed)
+    levels = equality_stack(rng)
+    a = HierarchySolver(jit=True, shortcut=True).solve(levels, damping)
+    b = HierarchySolver(jit=False).solve(levels, damping)
+    assert np.array_equal(a.ranks, b.ranks)
+    assert np.allclose(a.x, b.x, rtol=0, atol=1e-10 * (1 + np.abs(b.x).max()))
+    assert np.allclose(a.residuals, b.residuals, rtol=1e-9, atol=1e-10)
+    ref, optimal = projector_hierarchy(levels, damping=damping)
+    assert np.allclose(a.x, ref, rtol=0, atol=1e-9 * (1 + np.abs(ref).max()))
+    assert np.allclose(a.residuals, optimal, rtol=1e-9, atol=1e-9 * (1 + np.abs(ref).max()))
+
+
+def test_drifting_sequence_with_merged_blocks_and_rank_changes():
+    """Consecutive solves: the full-rank levels found at one call are stepped together
+    at the next (one block); a level that loses rank splits the block again."""
+    rng = np.random.default_rng(7)
+    n = 14
+    base = [rng.standard_normal((m, n)) for m in (3, 4, 2, 20)]
+    targets = [rng.standard_normal(A.shape[0]) for A in base]
+    fast, slow = HierarchySolver(n, jit=True), HierarchySolver(n, jit=False)
+    for t in range(30):
+        levels = []
+        for k, (A, b) in enumerate(zip(base, targets, strict=True)):
+            A = A + 0.01 * np.sin(0.3 * t + k) * np.ones_like(A)
+            if k == 1 and 10 <= t < 20:  # rank drops for a while
+                A = A.copy()
+                A[1] = A[0]
+            levels.append((A, b + 0.1 * np.cos(0.2 * t)))
+        a, b = fast.solve(levels), slow.solve(levels)
+        assert np.array_equal(a.ranks, b.ranks), t
+        assert np.allclose(a.x, b.x, rtol=0, atol=1e-10 * (1 + np.abs(b.x).max())), t
+    assert any(k1 - k0 > 1 for k0, k1 in fast._structure.blocks)  # merging happened
+
+
+def test_damped_call_after_undamped_ones():
+    """A persistent solver plans merged blocks from undamped calls; a damped call
+    afterwards must step its damped levels one by one, as the NumPy path does."""
+    rng = np.random.default_rng(3)
+    n = 12
+    levels = [(rng.standard_normal((m, n)), rng.standard_normal(m)) for m in (3, 4, 2, 15)]
+    fast, slow = HierarchySolver(n, jit=True), HierarchySolver(n, jit=False)
+    for damping in (0.0, 0.0, 0.05, [0.0, 0.1, 0.0, 0.02], 0.0):
+        a, b = fast.solve(levels, damping), slow.solve(levels, damping)
+        assert np.allclose(a.x, b.x, rtol=0, atol=1e-10 * (1 + np.abs(b.x).max())), damping
+        ref, _ = projector_hierarchy(levels, damping=damping)
+        assert np.allclose(a.x, ref, rtol=0, atol=1e-9 * (1 + np.abs(ref).max())), damping
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_shortcut_path_uses_the_kernel_alike(seed):
+    """Stacks with inequalities: the shortcut's equality steps compiled or not give the
+    same answers (and the same method)."""
+    rng = np.random.default_rng(100 + seed)
+    levels = mixed_stack(rng)
+    a = HierarchySolver(jit=True, active_set=False).solve(levels)
+    b = HierarchySolver(jit=False, active_set=False).solve(levels)
+    assert a.method == b.method
+    assert np.allclose(a.x, b.x, rtol=0, atol=1e-7 * (1 + np.abs(b.x).max()))
+
+
+def test_jit_flag():
+    assert HierarchySolver(jit=None).jit is True
+    assert HierarchySolver(jit=False).jit is False
+
+
+def test_jit_refused_without_kernels(monkeypatch):
+    monkeypatch.setattr(_eqkernel, "equality_stack", None)
+    with pytest.raises(SolverError, match="compiled kernels"):
+        HierarchySolver(jit=True)
+    assert HierarchySolver().jit is False
