@@ -11,7 +11,7 @@ import pytest
 
 import sotpy.solvers.hierarchy as hierarchy
 from reference_hierarchy import cascade_hierarchy, projector_hierarchy
-from sotpy.solvers import HierarchySolver
+from sotpy.solvers import HierarchySolver, _eqkernel
 from sotpy.solvers._kkt import RCOND_MIN, kkt_solve
 
 
@@ -147,3 +147,29 @@ def test_refused_shape_is_not_retried_every_call(kkt_calls):
         np.testing.assert_allclose(res.x, x_ref, atol=1e-6)
     # one refusal on a corrected guess of the first call, one that starts the wait
     assert kkt_calls["refused"] <= 2 and kkt_calls["ok"] == 0
+
+
+@pytest.mark.skipif(_eqkernel.kkt is None, reason="numba missing or SOTPY_JIT=0")
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_kkt_equals_numpy(seed):
+    """The compiled assembly + dgesv + dgecon gives the NumPy path's answer, refusals
+    included (a singular system, an ill-conditioned one)."""
+    rng = np.random.default_rng(300 + seed)
+    n = int(rng.integers(8, 20))
+    upper = rng.standard_normal((int(rng.integers(1, 5)), n + 1))
+    last = rng.standard_normal((n + 3, n + 1)) if seed % 2 else None
+    fixed = rng.choice(n, size=int(rng.integers(0, 4)), replace=False)
+    values = rng.standard_normal(len(fixed))
+    a = kkt_solve(upper, last, n, fixed, values, compiled=True)
+    b = kkt_solve(upper, last, n, fixed, values, compiled=False)
+    assert a is not None and b is not None
+    for u, v in zip(a, b, strict=True):
+        np.testing.assert_allclose(u, v, rtol=1e-12, atol=1e-12 * (1 + np.abs(v).max(initial=0)))
+    # a duplicated upper row: singular, refused by both
+    dup = np.vstack([upper, upper[:1]])
+    assert kkt_solve(dup, last, n, fixed, values, compiled=True) is None
+    assert kkt_solve(dup, last, n, fixed, values, compiled=False) is None
+    # nearly parallel rows: refused by the condition number, by both
+    near = np.vstack([upper, upper[:1] + 1e-13 * rng.standard_normal(n + 1)])
+    assert kkt_solve(near, last, n, fixed, values, compiled=True) is None
+    assert kkt_solve(near, last, n, fixed, values, compiled=False) is None

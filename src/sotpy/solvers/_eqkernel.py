@@ -19,6 +19,7 @@ from .._jit import ENABLED
 
 equality_stack = None
 equality_all = None
+kkt = None
 
 if ENABLED:  # pragma: no branch - the environment decides
     import llvmlite.binding as _llvm
@@ -35,6 +36,8 @@ if ENABLED:  # pragma: no branch - the environment decides
     _dormqr = _external("dormqr", 13)
     _dtrtrs = _external("dtrtrs", 10)
     _dgels = _external("dgels", 11)
+    _dgesv = _external("dgesv", 8)
+    _dgecon = _external("dgecon", 9)
 
     _R, _L, _N, _T, _U = ord("R"), ord("L"), ord("N"), ord("T"), ord("U")
 
@@ -283,5 +286,61 @@ if ENABLED:  # pragma: no branch - the environment decides
             nb += 1
         return True, x, ranks, fro, res, plan[:nb].copy()
 
+    @_nb.njit(cache=True, nogil=True)
+    def _kkt(upper, last, has_last, n, fixed, values):  # pragma: no cover - compiled
+        """:func:`._kkt.kkt_solve`'s system, assembled and solved (``dgesv``) with its
+        reciprocal condition number (``dgecon``, 1-norm). Returns ``(info, rcond,
+        solution)``."""
+        w = fixed.shape[0]
+        mu = upper.shape[0]
+        size = n + w + mu
+        K = np.zeros((size, size)).T  # Fortran
+        rhs = np.zeros(size)
+        if has_last:
+            L = np.ascontiguousarray(last[:, :n])
+            K[:n, :n] = L.T @ L
+            c = np.ascontiguousarray(last[:, n])
+            rhs[:n] = -(L.T @ c)
+        else:
+            for i in range(n):
+                K[i, i] = 1.0
+        for i in range(w):
+            K[fixed[i], n + i] = 1.0
+            K[n + i, fixed[i]] = 1.0
+            rhs[n + i] = values[i]
+        for r in range(mu):
+            for j in range(n):
+                K[j, n + w + r] = upper[r, j]
+                K[n + w + r, j] = upper[r, j]
+            rhs[n + w + r] = -upper[r, n]
+        anorm = np.zeros(1)
+        for j in range(size):
+            acc = 0.0
+            for i in range(size):
+                acc += abs(K[i, j])
+            anorm[0] = max(anorm[0], acc)
+        iw = np.zeros(8, dtype=np.int32)
+        ipiv = np.zeros(size, dtype=np.int32)
+        iw[0] = size
+        iw[1] = 1
+        iw[2] = max(size, 1)
+        _dgesv(
+            iw[0:].ctypes, iw[1:].ctypes, K.ctypes, iw[2:].ctypes, ipiv.ctypes,
+            rhs.ctypes, iw[2:].ctypes, iw[3:].ctypes,
+        )  # fmt: skip
+        if iw[3] != 0:
+            return iw[3], 0.0, rhs
+        ch = np.zeros(1, dtype=np.uint8)
+        ch[0] = ord("1")
+        rcond = np.zeros(1)
+        work = np.empty(4 * size)
+        iwork = np.empty(size, dtype=np.int32)
+        _dgecon(
+            ch.ctypes, iw[0:].ctypes, K.ctypes, iw[2:].ctypes, anorm.ctypes, rcond.ctypes,
+            work.ctypes, iwork.ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4], rcond[0], rhs
+
     equality_stack = _equality_stack
     equality_all = _equality_all
+    kkt = _kkt

@@ -44,6 +44,15 @@ import numpy as np
 from scipy.linalg.lapack import dgecon as _dgecon
 from scipy.linalg.lapack import dgesv as _dgesv
 
+from . import _eqkernel
+
+_EMPTY = np.zeros((0, 1))
+
+
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
 #: smallest reciprocal condition number of the KKT matrix accepted (else: null space)
 RCOND_MIN = 1e-9
 
@@ -54,6 +63,7 @@ def kkt_solve(
     n: int,
     fixed: np.ndarray,
     values: np.ndarray,
+    compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Solve the KKT system above.
 
@@ -69,6 +79,18 @@ def kkt_solve(
         condition number is below :data:`RCOND_MIN`.
     """
     w = len(fixed)
+    if _eqkernel.kkt is not None and compiled:
+        info, rcond, sol = _eqkernel.kkt(
+            _contiguous(upper),
+            _contiguous(last) if last is not None else _EMPTY,
+            last is not None,
+            n,
+            np.asarray(fixed, dtype=np.int64),
+            np.asarray(values, dtype=np.float64),
+        )
+        if info != 0 or not rcond >= RCOND_MIN:
+            return None
+        return sol[:n], sol[n : n + w]
     mu = upper.shape[0]
     size = n + w + mu
     K = np.zeros((size, size), order="F")
