@@ -91,3 +91,38 @@ def test_jit_refused_without_kernels(monkeypatch):
     with pytest.raises(SolverError, match="compiled kernels"):
         HierarchySolver(jit=True)
     assert HierarchySolver().jit is False
+
+
+def test_kernel_refusing_its_arguments_falls_back_to_numpy(monkeypatch):
+    """Compilation is frozen after the warm-up: a kernel that meets argument types it
+    was not compiled for raises TypeError; the solver warns once and answers with the
+    NumPy path from then on (never a stall, never a wrong value)."""
+    from sotpy.errors import SotpyWarning
+
+    def refuse(*_args):
+        raise TypeError("No matching definition for argument type(s)")
+
+    rng = np.random.default_rng(11)
+    levels = equality_stack(rng)
+    expected = HierarchySolver(jit=False).solve(levels)
+    solver = HierarchySolver(jit=True)
+    monkeypatch.setattr(_eqkernel, "equality_all", refuse)
+    with pytest.warns(SotpyWarning, match="NumPy from now on"):
+        res = solver.solve(levels)
+    assert solver.jit is False
+    np.testing.assert_allclose(res.x, expected.x, rtol=0, atol=1e-12)
+    res = solver.solve(levels)  # no second warning, same answer
+    np.testing.assert_allclose(res.x, expected.x, rtol=0, atol=1e-12)
+
+
+def test_kernels_do_not_compile_after_the_warm_up():
+    HierarchySolver(jit=True)
+    with pytest.raises(TypeError):
+        _eqkernel.equality_all(  # float32 matrix: a new signature, refused
+            np.zeros((2, 3), dtype=np.float32),
+            np.array([0, 2], dtype=np.int64),
+            np.zeros((1, 2), dtype=np.int64),
+            np.zeros(1),
+            1e-9,
+            0,
+        )

@@ -14,6 +14,7 @@ on a machine pays the compilation (tens of seconds on a slow machine).
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -34,3 +35,15 @@ def kernel(fn: F) -> F | None:
     if not ENABLED:
         return None
     return _numba.njit(cache=True, nogil=True)(fn)
+
+
+def report_compile(what: str, seconds: float) -> None:
+    """Say on stderr that ``what`` was compiled (not loaded from the cache) when that
+    took long enough to be noticed; a first run on a machine is otherwise a silent
+    pause."""
+    if seconds > 3.0:
+        print(
+            f"sotpy: compiled {what} in {seconds:.0f} s (first use on this machine;"
+            " cached for the next runs)",
+            file=sys.stderr,
+        )

@@ -13,13 +13,39 @@ consecutive levels known to be of full row rank are stepped together, as by
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from .._jit import ENABLED
+from .._jit import ENABLED, report_compile
 
 equality_stack = None
 equality_all = None
 kkt = None
+_warm: list[bool] = []
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels for the argument types the
+    solver passes, once per process, so that a control loop's first tick does not pay
+    for it; then forbid further compilation: a call with other types raises
+    ``TypeError`` (the solver falls back to NumPy) instead of stalling a tick."""
+    if equality_all is None or _warm:
+        return
+    start = time.perf_counter()
+    n = 3
+    A = np.hstack([np.eye(n), -np.ones((n, 1))])
+    starts = np.array([0, 1, n], dtype=np.int64)
+    blocks = np.array([[0, 1], [1, 2]], dtype=np.int64)
+    lams = np.zeros(2)
+    equality_all(A, starts, blocks, lams, 1e-9, 1)
+    equality_stack(A, starts, blocks, np.ones(2), lams, 1e-9, 1)
+    kkt(A[:1], A[1:], True, n, np.zeros(1, dtype=np.int64), np.zeros(1))
+    for fn in (equality_all, equality_stack, kkt):
+        fn.disable_compile()
+    _warm.append(True)
+    report_compile("the hierarchical solver kernels", time.perf_counter() - start)
+
 
 if ENABLED:  # pragma: no branch - the environment decides
     import llvmlite.binding as _llvm

@@ -47,6 +47,7 @@ from scipy.linalg.lapack import dgesv as _dgesv
 from . import _eqkernel
 
 _EMPTY = np.zeros((0, 1))
+_refused: list[bool] = []  # the compiled kernel refused its arguments once
 
 
 def _contiguous(a: np.ndarray) -> np.ndarray:
@@ -79,18 +80,22 @@ def kkt_solve(
         condition number is below :data:`RCOND_MIN`.
     """
     w = len(fixed)
-    if _eqkernel.kkt is not None and compiled:
-        info, rcond, sol = _eqkernel.kkt(
-            _contiguous(upper),
-            _contiguous(last) if last is not None else _EMPTY,
-            last is not None,
-            n,
-            np.asarray(fixed, dtype=np.int64),
-            np.asarray(values, dtype=np.float64),
-        )
-        if info != 0 or not rcond >= RCOND_MIN:
-            return None
-        return sol[:n], sol[n : n + w]
+    if _eqkernel.kkt is not None and compiled and not _refused:
+        try:
+            info, rcond, sol = _eqkernel.kkt(
+                _contiguous(upper),
+                _contiguous(last) if last is not None else _EMPTY,
+                last is not None,
+                n,
+                np.asarray(fixed, dtype=np.int64),
+                np.asarray(values, dtype=np.float64),
+            )
+        except TypeError:  # types the kernel was not compiled for: NumPy from now on
+            _refused.append(True)
+        else:
+            if info != 0 or not rcond >= RCOND_MIN:
+                return None
+            return sol[:n], sol[n : n + w]
     mu = upper.shape[0]
     size = n + w + mu
     K = np.zeros((size, size), order="F")

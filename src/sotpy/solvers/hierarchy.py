@@ -76,11 +76,12 @@ See ``docs/solvers.md`` for the details and the measured costs.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
 from sotpy._blas import limit_blas_threads
-from sotpy.errors import SolverError
+from sotpy.errors import SolverError, SotpyWarning
 
 from . import _eqkernel
 from ._boxset import DUAL_TOL, BoxActiveSet, DualCheck
@@ -292,6 +293,8 @@ class HierarchySolver:
                 " (numba missing or SOTPY_JIT=0)"
             )
         self.jit = _eqkernel.equality_stack is not None if jit is None else bool(jit)
+        if self.jit:
+            _eqkernel.warm_up()
         self._stepper: NullspaceStepper | None = None
         self._structure: _Structure | None = None
         self._qp_class = DaqpQP if backend == "daqp" else ProxQP
@@ -507,8 +510,10 @@ class HierarchySolver:
         fro = self._fro
         tol = self.rank_tol
         last = st.last
+        ranks = None
         if self.jit:
             ranks = self._compiled_steps(A_st, st.starts64, st.blocks, lams, last, stepper)
+        if ranks is not None:
             undamped = [r if lam == 0.0 else -1 for r, lam in zip(ranks, lams, strict=True)]
             st.blocks = _plan_blocks(sizes, undamped)
             st.eq_full = [bool(ranks[k] == sizes[k]) for k in st.nonempty] or None
@@ -542,14 +547,18 @@ class HierarchySolver:
         norms, recursion, residuals and the next plan of merged blocks. ``None`` when a
         matrix entry is not finite and ``check`` is off (the caller then takes the
         NumPy path, which reports it)."""
-        ok, x, ranks, fro, res, plan = _eqkernel.equality_all(
-            st.A,
-            st.starts64,
-            np.asarray(st.blocks, dtype=np.int64).reshape(-1, 2),
-            np.array(lams, dtype=np.float64),
-            self.rank_tol,
-            st.last,
-        )
+        try:
+            ok, x, ranks, fro, res, plan = _eqkernel.equality_all(
+                st.A,
+                st.starts64,
+                np.asarray(st.blocks, dtype=np.int64).reshape(-1, 2),
+                np.array(lams, dtype=np.float64),
+                self.rank_tol,
+                st.last,
+            )
+        except TypeError as exc:  # types the kernel was not compiled for: NumPy
+            self._stop_jit(exc)
+            return None
         if not ok:
             if self.check:
                 _raise_nonfinite_matrix(parsed)
@@ -564,19 +573,33 @@ class HierarchySolver:
             )
         return out
 
-    def _compiled_steps(self, A, starts64, blocks, lams, last, stepper) -> np.ndarray:
+    def _stop_jit(self, exc: Exception) -> None:
+        self.jit = False
+        warnings.warn(
+            f"HierarchySolver: compiled kernels refused the data ({exc}); NumPy from now on",
+            SotpyWarning,
+            stacklevel=4,
+        )
+
+    def _compiled_steps(self, A, starts64, blocks, lams, last, stepper) -> np.ndarray | None:
         """The equality recursion over the levels of ``A`` (rows ``starts64[k]:
         starts64[k + 1]``, blocks of full-rank levels stepped together) as one compiled
-        call; the point lands in ``stepper`` (whose basis is then stale)."""
-        x, ranks = _eqkernel.equality_stack(
-            A,
-            starts64,
-            np.array(blocks, dtype=np.int64).reshape(-1, 2),
-            self._fro,
-            np.array(lams, dtype=np.float64),
-            self.rank_tol,
-            last,
-        )
+        call; the point lands in ``stepper`` (whose basis is then stale). None (nothing
+        done, compiled kernels off from now on) on argument types it was not compiled
+        for."""
+        try:
+            x, ranks = _eqkernel.equality_stack(
+                A,
+                starts64,
+                np.array(blocks, dtype=np.int64).reshape(-1, 2),
+                self._fro,
+                np.array(lams, dtype=np.float64),
+                self.rank_tol,
+                last,
+            )
+        except TypeError as exc:  # types the kernel was not compiled for: NumPy
+            self._stop_jit(exc)
+            return None
         stepper.set_point(x)
         return ranks.astype(np.intp)
 
@@ -666,10 +689,13 @@ class HierarchySolver:
             # the whole stack's equality rows; if the point satisfies every inequality
             # row it is the answer (tried first when it was so at the previous call)
             last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
+            done = None
             if self.jit and len(Aeq):
                 eq_starts = np.array([b[0] for b in st.eq_bounds] + [len(Aeq)], dtype=np.int64)
                 blocks = [(k, k + 1) for k, b in enumerate(st.eq_bounds) if b[1] > b[0]]
-                ranks[:] = self._compiled_steps(Aeq, eq_starts, blocks, lams, last, stepper)
+                done = self._compiled_steps(Aeq, eq_starts, blocks, lams, last, stepper)
+            if done is not None:
+                ranks[:] = done
             else:
                 for k, (e0, e1, _, _) in enumerate(st.eq_bounds):
                     if e1 > e0 and stepper.nf > 0:

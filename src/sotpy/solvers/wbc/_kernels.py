@@ -4,9 +4,11 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from ..._jit import kernel
+from ..._jit import kernel, report_compile
 
 
 def _reduce(A, c, E, f, w, C, lo, hi, reg, nv, na):  # pragma: no cover - compiled
@@ -128,6 +130,7 @@ def warm_up() -> None:
     caller falls back to NumPy) instead of stalling a control tick for seconds."""
     if reduce is None or guess is None or _warm:
         return
+    start = time.perf_counter()
     nv, na = 2, 1
     n = nv + na
     A = np.eye(nv, n)
@@ -143,3 +146,4 @@ def warm_up() -> None:
     reduce.disable_compile()
     guess.disable_compile()
     _warm.append(True)
+    report_compile("the whole-body QP kernels", time.perf_counter() - start)
