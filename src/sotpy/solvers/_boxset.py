@@ -42,6 +42,8 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dtrtrs as _dtrtrs
 
+from . import _eqkernel
+
 _lstsq = np.linalg.lstsq
 
 #: relative threshold below which a multiplier counts as zero (undecided)
@@ -61,11 +63,20 @@ class BoxActiveSet:
         self.hi = np.full(n, np.inf)
         self.cols = self.coef = self.rows = None
 
-    def set_box(self, A0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    def set_box(self, A0: np.ndarray, lo: np.ndarray, hi: np.ndarray, jit: bool = False) -> bool:
         """Read the box from level 0's rows ``lo <= A0 x <= hi``; ``False`` when a row
-        has not exactly one nonzero entry or two rows bound the same variable."""
+        has not exactly one nonzero entry or two rows bound the same variable. With
+        ``jit``, a box of the remembered structure is read by one compiled call."""
         cols, coef = self.cols, self.coef
         m = A0.shape[0]
+        if jit and cols is not None and len(cols) == m and _eqkernel.box_update is not None:
+            try:
+                if _eqkernel.box_update(
+                    A0, m, self.n, cols, coef, lo, hi, self.lo, self.hi, self.at_lo, self.at_hi
+                ):
+                    return True
+            except TypeError:  # types the kernel was not compiled for: NumPy below
+                pass
         same = (
             cols is not None
             and len(cols) == m

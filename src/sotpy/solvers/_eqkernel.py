@@ -22,6 +22,9 @@ from .._jit import ENABLED, report_compile
 equality_stack = None
 equality_all = None
 kkt = None
+residuals = None
+box_update = None
+bounds_prepare = None
 _warm: list[bool] = []
 
 
@@ -41,7 +44,15 @@ def warm_up() -> None:
     equality_all(A, starts, blocks, lams, 1e-9, 1)
     equality_stack(A, starts, blocks, np.ones(2), lams, 1e-9, 1)
     kkt(A[:1], A[1:], True, n, np.zeros(1, dtype=np.int64), np.zeros(1))
-    for fn in (equality_all, equality_stack, kkt):
+    residuals(A, np.ones(n + 1), starts, np.zeros(n), np.ones(n), True)
+    box_update(  # a column slice of the stacked buffer, as the solver passes it
+        A[:, :n], n, n, np.arange(n), np.ones(n), -np.ones(n), np.ones(n), np.zeros(n), np.zeros(n),
+        np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_),
+    )  # fmt: skip
+    z = np.zeros(n)
+    bounds_prepare(A, -np.ones(n), np.ones(n), z, z.copy(), z.copy(), z.copy(),
+                   np.zeros(n, dtype=np.bool_), starts)  # fmt: skip
+    for fn in (equality_all, equality_stack, kkt, residuals, box_update, bounds_prepare):
         fn.disable_compile()
     _warm.append(True)
     report_compile("the hierarchical solver kernels", time.perf_counter() - start)
@@ -367,6 +378,118 @@ if ENABLED:  # pragma: no branch - the environment decides
         )  # fmt: skip
         return iw[4], rcond[0], rhs
 
+    @_nb.njit(cache=True, nogil=True)
+    def _residuals(A, x_aug, starts, rlo, rup, general):  # pragma: no cover - compiled
+        """Each level's ``||A_k x - b_k||`` (rows ``[A | -b]``), or with ``general`` its
+        violation ``||max(rlo - v, 0) + max(v - rup, 0)||`` with ``v = [A | -ref] x_aug``
+        (the solver's bounds relative to ``ref``)."""
+        p = starts.shape[0] - 1
+        w = A.shape[1]
+        res = np.zeros(p)
+        for k in range(p):
+            acc = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                v = 0.0
+                for j in range(w):
+                    v += A[i, j] * x_aug[j]
+                if general:
+                    below = rlo[i] - v
+                    above = v - rup[i]
+                    e = 0.0
+                    if below > 0.0:
+                        e += below
+                    if above > 0.0:
+                        e += above
+                    if below != below or above != above:  # NaN (as np.maximum): the
+                        e = np.nan  # caller's finiteness test reports it
+                    v = e
+                acc += v * v
+            res[k] = np.sqrt(acc)
+        return res
+
+    @_nb.njit(cache=True, nogil=True)
+    def _box_update(A, m, n, cols, coef, lo, hi, blo, bhi, at_lo, at_hi):  # pragma: no cover
+        """:meth:`._boxset.BoxActiveSet.set_box` when the box's structure is the
+        remembered one (row ``i`` of ``A[:m, :n]`` has its only nonzero, ``coef[i]``, in
+        column ``cols[i]``): the bounds ``blo <= x <= bhi`` and the remembered active
+        set updated in place. ``False`` (nothing changed) when the structure differs."""
+        for i in range(m):
+            for j in range(n):
+                a = A[i, j]
+                if j == cols[i]:
+                    if a != coef[i]:
+                        return False
+                elif a != 0.0:
+                    return False
+        blo[:] = -np.inf
+        bhi[:] = np.inf
+        for i in range(m):
+            c = coef[i]
+            j = cols[i]
+            if c < 0.0:
+                blo[j] = hi[i] / c
+                bhi[j] = lo[i] / c
+            else:
+                blo[j] = lo[i] / c
+                bhi[j] = hi[i] / c
+        for j in range(n):
+            if not np.isfinite(blo[j]):
+                at_lo[j] = False
+            if not np.isfinite(bhi[j]):
+                at_hi[j] = False
+            if blo[j] == bhi[j]:  # equal bounds fix x_j
+                at_lo[j] = True
+                at_hi[j] = False
+        return True
+
+    @_nb.njit(cache=True, nogil=True)
+    def _bounds_prepare(A, lo, up, ref, rlo, rup, d, eqmask, starts):  # pragma: no cover
+        """The general path's bookkeeping of :meth:`HierarchySolver._prepare` in one
+        pass: ``ref`` (each row's lower bound if finite, else its upper one, else 0),
+        ``A[:, n] = -ref``, ``rlo = lo - ref``, ``rup = up - ref``, ``d = up - lo``,
+        the equality mask (``d == 0``) updated in place, and each level's Frobenius
+        norm. Returns ``(fro, finite, bounds_ok, changed)``: the matrices finite, every
+        ``d >= 0`` (no NaN), the mask changed."""
+        m = A.shape[0]
+        n = A.shape[1] - 1
+        ok = True
+        changed = False
+        for i in range(m):
+            lo_i = lo[i]
+            up_i = up[i]
+            if np.isfinite(lo_i):
+                r = lo_i
+            elif np.isfinite(up_i):
+                r = up_i
+            else:
+                r = 0.0
+            ref[i] = r
+            A[i, n] = -r
+            rlo[i] = lo_i - r
+            rup[i] = up_i - r
+            di = up_i - lo_i
+            d[i] = di
+            if not di >= 0.0:
+                ok = False
+            e = di == 0.0
+            if e != eqmask[i]:
+                eqmask[i] = e
+                changed = True
+        p = starts.shape[0] - 1
+        fro = np.zeros(p)
+        total = 0.0
+        for k in range(p):
+            acc = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                for j in range(n):
+                    acc += A[i, j] * A[i, j]
+            fro[k] = np.sqrt(acc)
+            total += acc
+        return fro, np.isfinite(total), ok, changed
+
     equality_stack = _equality_stack
     equality_all = _equality_all
+    bounds_prepare = _bounds_prepare
     kkt = _kkt
+    residuals = _residuals
+    box_update = _box_update

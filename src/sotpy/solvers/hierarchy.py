@@ -98,6 +98,7 @@ __all__ = [
 
 _F64 = np.dtype(np.float64)
 _BACKENDS = ("auto", "proxsuite", "daqp")
+_INVALID_KEY = b"\x00invalid"  # row classes never computed (no real key has 'i')
 #: primal-dual corrections of the box path's active set before falling back to QPs
 _BOX_ITERATIONS = 4
 #: calls to skip the KKT solve after it was refused
@@ -199,6 +200,7 @@ class _Structure:
         "eq_bounds",
         "eq_full",
         "eq_idx",
+        "eqmask",
         "hi_adj",
         "in_idx",
         "key",
@@ -400,6 +402,10 @@ class HierarchySolver:
                 A_st[s:e, :n] = A
                 lo_st[s:e] = lo
                 up_st[s:e] = lo if up is None else up
+            if self.jit:
+                done = self._bounds_compiled(st, parsed)
+                if done:
+                    return st, parsed
             # augmented column -ref, ref a finite bound of each row (the lower one, else
             # the upper one, else 0): rlo = lower - ref and rup = upper - ref bound A x - ref
             ref = st.ref
@@ -434,6 +440,28 @@ class HierarchySolver:
             self._classify(st, key)
         return st, parsed
 
+    def _bounds_compiled(self, st: _Structure, parsed) -> bool:
+        """The general path's bookkeeping after the copy (references, relative bounds,
+        norms, checks, row classes) in one compiled call; False (the NumPy code runs)
+        if the kernel refuses its arguments."""
+        try:
+            fro, finite, ok, changed = _eqkernel.bounds_prepare(
+                st.A, st.lo, st.up, st.ref, st.rlo, st.rup, st.d, st.eqmask, st.starts64
+            )
+        except TypeError as exc:
+            self._stop_jit(exc)
+            return False
+        self._fro = fro
+        if self.check and not finite:
+            _raise_nonfinite_matrix(parsed)
+        if self.check and not ok:
+            _raise_bad_bounds(parsed)
+        if changed or st.key is None or st.key == _INVALID_KEY:
+            key = st.eqmask.tobytes()
+            if key != st.key:
+                self._classify(st, key)
+        return True
+
     def _new_structure(self, sizes: tuple[int, ...], n: int) -> _Structure:
         st = _Structure()
         st.sizes = sizes
@@ -455,7 +483,8 @@ class HierarchySolver:
         st.nonempty_starts = np.array([starts[k] for k in st.nonempty], dtype=np.intp)
         st.last = int(st.nonempty[-1]) if len(st.nonempty) else -1
         st.m_max = max(mtot, 1)  # scratch rows: merged blocks, all inequality rows
-        st.key = b"\x00invalid"
+        st.key = _INVALID_KEY
+        st.eqmask = np.zeros(mtot, dtype=bool)
         st.qps = {}
         st.warm = {}
         st.blocks = [(k, k + 1) for k in range(len(sizes)) if sizes[k] > 0]
@@ -750,7 +779,7 @@ class HierarchySolver:
         if box is None:
             box = st.box = BoxActiveSet(self.n)
         s1 = st.starts[1]
-        if not box.set_box(st.A[:s1, : self.n], st.lo[:s1], st.up[:s1]):
+        if not box.set_box(st.A[:s1, : self.n], st.lo[:s1], st.up[:s1], self.jit):
             return None
         return box
 
@@ -1089,7 +1118,17 @@ class HierarchySolver:
     def _result(
         self, st, parsed, x_aug, ranks, method, qp_levels, iterations, converged
     ) -> HierarchyResult:
-        if len(st.nonempty):
+        res = None
+        if self.jit and len(st.nonempty):
+            try:
+                res = _eqkernel.residuals(
+                    st.A, np.ascontiguousarray(x_aug), st.starts64, st.rlo, st.rup, not st.all_eq
+                )
+            except TypeError as exc:
+                self._stop_jit(exc)
+        if res is not None:
+            pass
+        elif len(st.nonempty):
             with np.errstate(invalid="ignore", over="ignore"):  # non-finite: raised below
                 v = st.A @ x_aug  # A x - ref, row by row
             if not st.all_eq:
