@@ -575,7 +575,8 @@ class HierarchySolver:
         """The equality path as one compiled call (:func:`._eqkernel.equality_all`):
         norms, recursion, residuals and the next plan of merged blocks. ``None`` when a
         matrix entry is not finite and ``check`` is off (the caller then takes the
-        NumPy path, which reports it)."""
+        NumPy path, which reports it), or when the kernel refuses its arguments
+        (compiled kernels are then off for this solver)."""
         try:
             ok, x, ranks, fro, res, plan = _eqkernel.equality_all(
                 st.A,
