@@ -243,3 +243,38 @@ def test_guess_accepts_only_the_optimum(jit):
     # the same row twice: singular KKT matrix -> refused (never a garbage point)
     ok, _ = _guess(jit, H, g, Au, cu, Cy, lo, hi, [0, 0], [True, True])
     assert not ok
+
+
+@NO_NUMBA
+@pytest.mark.parametrize("dense", [False, True])
+def test_compiled_reduction_of_random_rows(dense):
+    """Random dynamics, tasks and constraints (torque columns sparse or dense): the
+    compiled reduction equals the NumPy one."""
+    from sotpy.solvers.wbc.model import Layout
+
+    rng = np.random.default_rng(5 + dense)
+    nv, na = 9, 6
+    layout = Layout(nv, na, [])
+    n = layout.n
+    A = rng.standard_normal((nv, n))
+    c = rng.standard_normal(nv)
+    E = rng.standard_normal((7, n))
+    C = rng.standard_normal((5, n))
+    if not dense:
+        E[:, nv : nv + na] = 0.0
+        E[2, nv + 1] = 1.5  # one torque entry
+        C[:, nv : nv + na] = 0.0
+        C[np.arange(3), nv + np.arange(3)] = 1.0  # torque-limit-like rows
+    tasks = [(0, E[:4], rng.standard_normal(4), rng.uniform(0.1, 2.0, 4)),
+             (1, E[4:], rng.standard_normal(3), rng.uniform(0.1, 2.0, 3))]  # fmt: skip
+    lo = -rng.uniform(0.5, 1.0, 5)
+    hi = rng.uniform(0.5, 1.0, 5)
+    lo[4] = -np.inf
+    qp = WeightedQP(np.arange(nv - na, nv), np.arange(nv - na), jit=True)
+    ref = qp.reduce(layout, (A, c), (C, lo, hi), tasks, 1e-3)
+    status, got = qp._reduce_compiled(layout, (A, c), (C, lo, hi), tasks, 1e-3)
+    assert status == 0
+    for a, b in zip(ref, got, strict=True):
+        assert np.array_equal(np.isinf(a), np.isinf(b))
+        fa, fb = a[np.isfinite(a)], b[np.isfinite(a)]
+        np.testing.assert_allclose(fb, fa, rtol=1e-12, atol=1e-12 * (1 + np.abs(fa).max()))

@@ -34,11 +34,8 @@ def _reduce(A, c, E, f, w, C, lo, hi, reg, nv, na):  # pragma: no cover - compil
         Ey = np.empty((m, ny))
         Ey[:, :nv] = E[:, :nv]
         Ey[:, nv:] = E[:, nv + na :]
-        Et = np.ascontiguousarray(E[:, nv : nv + na])
         fy = f.copy()
-        if np.any(Et != 0.0):
-            Ey += Et @ Tt
-            fy -= Et @ tt
+        _add_torque_columns(E, nv, na, Tt, tt, Ey, fy)
         for i in range(m):
             s = np.sqrt(w[i])
             Ey[i] *= s
@@ -49,15 +46,10 @@ def _reduce(A, c, E, f, w, C, lo, hi, reg, nv, na):  # pragma: no cover - compil
     Cy = np.empty((mc, ny))
     Cy[:, :nv] = C[:, :nv]
     Cy[:, nv:] = C[:, nv + na :]
-    Ct = np.ascontiguousarray(C[:, nv : nv + na])
-    if np.any(Ct != 0.0):
-        Cy += Ct @ Tt
-        shift = -(Ct @ tt)
-        lo = lo + shift
-        hi = hi + shift
-    else:
-        lo = lo.copy()
-        hi = hi.copy()
+    shift = np.zeros(mc)
+    _add_torque_columns(C, nv, na, Tt, tt, Cy, shift)
+    lo = lo + shift
+    hi = hi + shift
     status = 0
     for i in range(mc):
         if np.isnan(lo[i]) or np.isnan(hi[i]):
@@ -66,6 +58,33 @@ def _reduce(A, c, E, f, w, C, lo, hi, reg, nv, na):  # pragma: no cover - compil
         if lo[i] > hi[i] + 1e-12:
             status = 2
     return status, (H, g, Au, cu, Cy, lo, hi, Tt, tt)
+
+
+def _add_torque_columns(E, nv, na, Tt, tt, Ey, fy):  # pragma: no cover - compiled
+    """``Ey += E_tau T_tau`` and ``fy -= E_tau t_tau`` (``E_tau`` the torque columns of
+    ``E``), by rows and skipping zeros when ``E_tau`` is sparse (torque limits: one
+    entry a row; acceleration rows: none), by one product otherwise."""
+    m = E.shape[0]
+    nnz = 0
+    for i in range(m):
+        for j in range(na):
+            if E[i, nv + j] != 0.0:
+                nnz += 1
+    if nnz == 0:
+        return
+    if 4 * nnz > m * na:
+        Et = np.ascontiguousarray(E[:, nv : nv + na])
+        Ey += Et @ Tt
+        fy -= Et @ tt
+        return
+    ny = Tt.shape[1]
+    for i in range(m):
+        for j in range(na):
+            e = E[i, nv + j]
+            if e != 0.0:
+                for c in range(ny):
+                    Ey[i, c] += e * Tt[j, c]
+                fy[i] -= e * tt[j]
 
 
 def _guess(H, g, Au, cu, Cy, lo, hi, act, up, ptol, dtol_rel, lam_max):  # pragma: no cover
@@ -118,6 +137,7 @@ def _guess(H, g, Au, cu, Cy, lo, hi, act, up, ptol, dtol_rel, lam_max):  # pragm
     return True, y
 
 
+_add_torque_columns = kernel(_add_torque_columns)
 reduce = kernel(_reduce)
 guess = kernel(_guess)
 _warm: list[bool] = []
