@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
+
+import numpy as np
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -47,3 +50,24 @@ def report_compile(what: str, seconds: float) -> None:
             " cached for the next runs)",
             file=sys.stderr,
         )
+
+
+def refused(owner: str, exc: Exception) -> None:
+    """Warn that ``owner``'s compiled kernels refused their arguments (types they were
+    not compiled for, compilation being frozen after the warm-up) and that it uses its
+    NumPy path from now on."""
+    from .errors import SotpyWarning
+
+    warnings.warn(
+        f"{owner}: compiled kernels refused the data ({exc}); NumPy from now on",
+        SotpyWarning,
+        stacklevel=4,
+    )
+
+
+def c_float64(a: np.ndarray) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array (itself when it already is: the usual case,
+    checked without a copy), the layout the kernels were compiled for."""
+    if a.dtype == np.float64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.float64)

@@ -272,27 +272,13 @@ if ENABLED:  # pragma: no branch - the environment decides
         matrix entry is not finite."""
         n = A.shape[1] - 1
         p = starts.shape[0] - 1
-        fro = np.zeros(p)
-        total = 0.0
-        for k in range(p):
-            acc = 0.0
-            for i in range(starts[k], starts[k + 1]):
-                for j in range(n):
-                    acc += A[i, j] * A[i, j]
-            fro[k] = np.sqrt(acc)
-            total += acc
-        if not np.isfinite(total):
+        fro, finite = _level_norms(A, starts)
+        if not finite:
             return False, np.zeros(n), np.zeros(p, dtype=np.int64), fro, fro, blocks
         x, ranks = _equality_stack(A, starts, blocks, fro, lams, rank_tol, last)
-        res = np.zeros(p)
-        for k in range(p):
-            acc = 0.0
-            for i in range(starts[k], starts[k + 1]):
-                v = A[i, n]
-                for j in range(n):
-                    v += A[i, j] * x[j]
-                acc += v * v
-            res[k] = np.sqrt(acc)
+        x_aug = np.ones(n + 1)
+        x_aug[:n] = x
+        res = _residuals(A, x_aug, starts, fro, fro, False)  # (bounds unused: equalities)
         plan = np.zeros((p, 2), dtype=np.int64)
         nb = 0
         run = -1
@@ -377,6 +363,24 @@ if ENABLED:  # pragma: no branch - the environment decides
             work.ctypes, iwork.ctypes, iw[4:].ctypes,
         )  # fmt: skip
         return iw[4], rcond[0], rhs
+
+    @_nb.njit(cache=True, nogil=True)
+    def _level_norms(A, starts):  # pragma: no cover - compiled
+        """The Frobenius norm of each level's matrix (rows ``starts[k]:starts[k + 1]``
+        of ``A[:, :n]``, the last column being the targets) and whether all are
+        finite."""
+        n = A.shape[1] - 1
+        p = starts.shape[0] - 1
+        fro = np.zeros(p)
+        total = 0.0
+        for k in range(p):
+            acc = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                for j in range(n):
+                    acc += A[i, j] * A[i, j]
+            fro[k] = np.sqrt(acc)
+            total += acc
+        return fro, np.isfinite(total)
 
     @_nb.njit(cache=True, nogil=True)
     def _residuals(A, x_aug, starts, rlo, rup, general):  # pragma: no cover - compiled
@@ -475,17 +479,8 @@ if ENABLED:  # pragma: no branch - the environment decides
             if e != eqmask[i]:
                 eqmask[i] = e
                 changed = True
-        p = starts.shape[0] - 1
-        fro = np.zeros(p)
-        total = 0.0
-        for k in range(p):
-            acc = 0.0
-            for i in range(starts[k], starts[k + 1]):
-                for j in range(n):
-                    acc += A[i, j] * A[i, j]
-            fro[k] = np.sqrt(acc)
-            total += acc
-        return fro, np.isfinite(total), ok, changed
+        fro, finite = _level_norms(A, starts)
+        return fro, finite, ok, changed
 
     equality_stack = _equality_stack
     equality_all = _equality_all

@@ -44,14 +44,11 @@ import numpy as np
 from scipy.linalg.lapack import dgecon as _dgecon
 from scipy.linalg.lapack import dgesv as _dgesv
 
+from .._jit import c_float64
 from . import _eqkernel
 
 _EMPTY = np.zeros((0, 1))
 _refused: list[bool] = []  # the compiled kernel refused its arguments once
-
-
-def _contiguous(a: np.ndarray) -> np.ndarray:
-    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 
 #: smallest reciprocal condition number of the KKT matrix accepted (else: null space)
@@ -83,8 +80,8 @@ def kkt_solve(
     if _eqkernel.kkt is not None and compiled and not _refused:
         try:
             info, rcond, sol = _eqkernel.kkt(
-                _contiguous(upper),
-                _contiguous(last) if last is not None else _EMPTY,
+                c_float64(upper),
+                c_float64(last) if last is not None else _EMPTY,
                 last is not None,
                 n,
                 np.asarray(fixed, dtype=np.int64),

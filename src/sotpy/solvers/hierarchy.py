@@ -76,12 +76,12 @@ See ``docs/solvers.md`` for the details and the measured costs.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
 from sotpy._blas import limit_blas_threads
-from sotpy.errors import SolverError, SotpyWarning
+from sotpy._jit import refused
+from sotpy.errors import SolverError
 
 from . import _eqkernel
 from ._boxset import DUAL_TOL, BoxActiveSet, DualCheck
@@ -605,11 +605,7 @@ class HierarchySolver:
 
     def _stop_jit(self, exc: Exception) -> None:
         self.jit = False
-        warnings.warn(
-            f"HierarchySolver: compiled kernels refused the data ({exc}); NumPy from now on",
-            SotpyWarning,
-            stacklevel=4,
-        )
+        refused("HierarchySolver", exc)
 
     def _compiled_steps(self, A, starts64, blocks, lams, last, stepper) -> np.ndarray | None:
         """The equality recursion over the levels of ``A`` (rows ``starts64[k]:

@@ -35,12 +35,11 @@ multipliers tell the side of each active row.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
-from ...errors import SotpyError, SotpyWarning
+from ..._jit import c_float64, refused
+from ...errors import SotpyError
 from . import _kernels
 from .model import Layout
 
@@ -142,11 +141,7 @@ class WeightedQP:
 
     def _stop_jit(self, exc: Exception) -> None:
         self.jit = False
-        warnings.warn(
-            f"WeightedQP: compiled kernels refused the data ({exc}); NumPy from now on",
-            SotpyWarning,
-            stacklevel=3,
-        )
+        refused("WeightedQP", exc)
 
     def _reduce_compiled(self, layout: Layout, dyn, cons, tasks, regularisation: float):
         A, c = dyn
@@ -157,10 +152,8 @@ class WeightedQP:
         else:
             E, f, w = np.zeros((0, layout.n)), np.zeros(0), np.zeros(0)
         C, lo, hi = cons
-        return _kernels.reduce(
-            _c(A), _c(c), _c(E), _c(f), _c(w), _c(C), _c(lo), _c(hi),
-            float(regularisation), layout.nv, layout.na,
-        )  # fmt: skip
+        args = [c_float64(a) for a in (A, c, E, f, w, C, lo, hi)]
+        return _kernels.reduce(*args, float(regularisation), layout.nv, layout.na)
 
     # --------------------------------------------------------------------- solve
     def solve(
@@ -310,10 +303,3 @@ def _stop(idx: slice | np.ndarray) -> int:
     if isinstance(idx, slice):
         return idx.stop
     return int(idx[-1]) + 1 if len(idx) else 0
-
-
-def _c(a: np.ndarray) -> np.ndarray:
-    """C-contiguous float64 (a no-op for the usual arrays)."""
-    if a.dtype == np.float64 and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=np.float64)
