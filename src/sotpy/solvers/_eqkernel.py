@@ -205,7 +205,10 @@ if ENABLED:  # pragma: no branch - the environment decides
         m = rows.shape[0]
         n = W.shape[0] - 1
         nf = n - c0
-        maug = np.ascontiguousarray((rows @ W)[:, c0:])  # [A Z | A x - b]
+        if c0 == 0:  # no step yet: Z = I, x = 0, so [A Z | A x - b] is the rows
+            maug = rows.copy()  # a copy: LAPACK overwrites views of maug below
+        else:
+            maug = np.ascontiguousarray((rows @ W)[:, c0:])  # [A Z | A x - b]
         thr = rank_tol * scale
         if not need and not full_only and m > nf and lam == 0.0:
             # least squares from a pivoted QR of M itself
