@@ -205,10 +205,9 @@ if ENABLED:  # pragma: no branch - the environment decides
         m = rows.shape[0]
         n = W.shape[0] - 1
         nf = n - c0
-        if c0 == 0:  # no step yet: Z = I, x = 0, so [A Z | A x - b] is the rows
-            maug = rows.copy()  # a copy: LAPACK overwrites views of maug below
-        else:
-            maug = np.ascontiguousarray((rows @ W)[:, c0:])  # [A Z | A x - b]
+        # [A Z | A x - b]; before any step (Z = I, x = 0) the rows themselves, copied:
+        # LAPACK overwrites views of maug below
+        maug = rows.copy() if c0 == 0 else np.ascontiguousarray((rows @ W)[:, c0:])
         thr = rank_tol * scale
         if not need and not full_only and m > nf and lam == 0.0:
             # least squares from a pivoted QR of M itself
