@@ -464,8 +464,9 @@ def test_out_of_reach_stops_at_the_best_reachable_point():
     """Nao asked for a point 0.36 m away, forward and low: the CoM reaches its bound and
     the wrist stops 2.8 cm short. scipy's SLSQP, minimising the wrist's distance subject
     to both soles at their start placements, the coupling, the CoM inside the shrunk
-    polygon and the joint limits, cannot do better from the final configuration (and
-    finds the same value from a configuration of the way there)."""
+    polygon and the joint limits, cannot do better from the final configuration (or the
+    closest one it converges from: SLSQP sometimes stalls on rounding noise) and finds
+    the same value from a configuration of the way there."""
     offset = (0.35, 0.0, 0.1)
     r = run_reach("nao", duration=2.0, target_offset=offset, damping=1e-2, quiet=True)
     assert r["out_of_reach"] and not r["reached"]
@@ -484,7 +485,11 @@ def test_out_of_reach_stops_at_the_best_reachable_point():
     iR = model.joints[model.getJointId("RHipYawPitch")].idx_q
     target = r["target"]
 
-    def best_from(base: np.ndarray) -> float:
+    def best_from(base: np.ndarray) -> float | None:
+        """SLSQP's best distance from ``base``, or None when it stops without
+        convergence (e.g. "Positive directional derivative for linesearch": a stall on
+        rounding noise that the last bits of the start decide)."""
+
         def q_of(dq):
             return pin.integrate(model, base, dq)
 
@@ -518,14 +523,24 @@ def test_out_of_reach_stops_at_the_best_reachable_point():
             constraints=[{"type": "eq", "fun": equalities}, {"type": "ineq", "fun": inside}],
             options={"maxiter": 500, "ftol": 1e-14},
         )
-        assert res.success, res.message
+        if not res.success:
+            return None
         assert np.abs(equalities(res.x)).max() <= 1e-9 and inside(res.x).min() >= -1e-9
         return math.sqrt(res.fun)
 
-    best = best_from(qs[-1])
+    def best_near(index: int) -> float:
+        """From the configuration of tick ``index``, or the closest earlier ones on which
+        SLSQP converges (each a point of the run, all near the same local optimum)."""
+        for k in (index, index - 1, index - 3, index - 10):
+            value = best_from(qs[k])
+            if value is not None:
+                return value
+        pytest.fail(f"SLSQP did not converge from the configurations near tick {index}")
+
+    best = best_near(len(qs) - 1)
     assert r["wrist_final"] <= best + 1e-4  # the demo's point is (locally) the best
     assert best <= r["wrist_final"] + 1e-9
-    assert best_from(qs[300]) == pytest.approx(best, abs=1e-5)
+    assert best_near(300) == pytest.approx(best, abs=1e-5)
 
 
 def test_viewer_is_closed_at_the_end():
