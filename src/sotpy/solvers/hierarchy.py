@@ -534,19 +534,12 @@ class HierarchySolver:
         self, st: _Structure, stepper: NullspaceStepper, lams: list[float]
     ) -> np.ndarray:
         """All rows are equalities: the null-space recursion, undamped levels known to be
-        of full row rank (from the previous call) factored together."""
+        of full row rank (from the previous call) factored together (the NumPy path; the
+        compiled one is :meth:`_equality_compiled`)."""
         sizes, slices, A_st = st.sizes, st.slices, st.A
         fro = self._fro
         tol = self.rank_tol
         last = st.last
-        ranks = None
-        if self.jit:
-            ranks = self._compiled_steps(A_st, st.starts64, st.blocks, lams, last, stepper)
-        if ranks is not None:
-            undamped = [r if lam == 0.0 else -1 for r, lam in zip(ranks, lams, strict=True)]
-            st.blocks = _plan_blocks(sizes, undamped)
-            st.eq_full = [bool(ranks[k] == sizes[k]) for k in st.nonempty] or None
-            return ranks
         ranks = np.zeros(len(sizes), dtype=np.intp)
         step = stepper.step
         for k0, k1 in st.blocks:
