@@ -31,11 +31,14 @@ accurate to about ``1e-16 / RCOND_MIN`` relative; otherwise (a level close to ra
 deficiency, a singular configuration) the caller runs the null-space recursion, whose
 rank threshold decides.
 
-The multipliers ``mu`` of the fixed variables' rows are the bounds' multipliers at the
-last level: releasing bound ``j`` along the direction ``d`` that moves ``x_j`` into the
-box by ``s_j`` and keeps the other rows of ``U`` changes the last level's objective at
-the rate ``-s_j mu_j`` (the gradient is ``-U^T mu``). The upper levels are met exactly,
-so they do not decide a bound: its verdict is this rate (see :mod:`._boxset`).
+The multipliers ``mu`` (of the fixed variables' rows, then of the rows of ``U``) are
+the constraints' multipliers at the last level: releasing a constraint ``j`` along the
+direction ``d`` that moves its row by ``s_j`` (into the box for a fixed variable, into
+the interval for an inequality row held at a bound) and keeps the other constraints
+changes the last level's objective at the rate ``-s_j mu_j`` (the gradient is
+``-U^T mu``). The upper levels are met exactly, so they do not decide a bound: its
+verdict is this rate (see :mod:`._boxset` and the general rows of
+:mod:`.hierarchy`'s active-set path).
 """
 
 from __future__ import annotations
@@ -73,7 +76,8 @@ def kkt_solve(
         values: their values.
 
     Returns:
-        ``(x, mu_fixed)``, or None when the system is singular or its reciprocal
+        ``(x, mu)``, ``mu`` the multipliers of the fixed variables' rows then of the
+        rows of ``upper``; or None when the system is singular or its reciprocal
         condition number is below :data:`RCOND_MIN`.
     """
     w = len(fixed)
@@ -92,7 +96,7 @@ def kkt_solve(
         else:
             if info != 0 or not rcond >= RCOND_MIN:
                 return None
-            return sol[:n], sol[n : n + w]
+            return sol[:n], sol[n:]
     mu = upper.shape[0]
     size = n + w + mu
     K = np.zeros((size, size), order="F")
@@ -120,4 +124,4 @@ def kkt_solve(
     rcond, info = _dgecon(lu, anorm, "1")
     if info != 0 or not rcond >= RCOND_MIN:
         return None
-    return sol[:n], sol[n : n + w]
+    return sol[:n], sol[n:]

@@ -57,7 +57,9 @@ Solution paths
   undamped: the *active-set path* (:mod:`._boxset`): the variables guessed at a bound
   (the previous call's) are fixed, the equality rows below solved by the null-space
   recursion, and the guess verified (primal feasibility, lexicographic multipliers),
-  corrected a few times if needed; no QP;
+  corrected a few times if needed; no QP. Inequality rows of the levels below guessed
+  at a bound are held there too (one KKT solve, their multipliers verified) when the
+  levels above the last can be met exactly;
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
@@ -104,6 +106,10 @@ _BOX_ITERATIONS = 4
 #: calls to skip the KKT solve after it was refused
 _KKT_RETRY = 50
 _NO_INDEX = np.zeros(0, dtype=np.intp)
+#: a verdict of the active-set path's KKT solve: held rows released, solve again
+_UNDECIDED = -2
+#: relative distance to a bound within which a cascade's row counts as held at it
+_HELD_TOL = 1e-7
 _NO_VALUE = np.zeros(0)
 
 
@@ -118,7 +124,8 @@ class HierarchyResult:
             pinned rows in the null space of the levels above; 0 for a level whose
             inequalities are inactive, and for every level with ``method="daqp"``).
         method: ``"equality"`` (no inequality row), ``"shortcut"`` (inequalities, no
-            QP needed), ``"cascade"`` (some levels solved as QPs) or ``"daqp"``.
+            QP needed), ``"active-set"`` (a box first, bounds or rows held at a bound,
+            no QP), ``"cascade"`` (some levels solved as QPs) or ``"daqp"``.
         qp_levels: the levels solved by a QP (``"daqp"``: all of them).
         iterations: total QP iterations.
         converged: every QP reached its tolerance (``False``: the QP back-end stopped
@@ -203,6 +210,7 @@ class _Structure:
         "eqmask",
         "hi_adj",
         "in_idx",
+        "in_level",
         "key",
         "kkt_wait",
         "last",
@@ -217,6 +225,8 @@ class _Structure:
         "rlo",
         "rup",
         "shortcut_ok",
+        "side",
+        "side_wait",
         "sizes",
         "slices",
         "starts",
@@ -520,6 +530,9 @@ class HierarchySolver:
             e += ne
             i += ni
         st.eq_bounds = bounds
+        st.in_level = np.repeat(
+            np.arange(len(bounds), dtype=np.intp), [i1 - i0 for _, _, i0, i1 in bounds]
+        )
         w = st.A.shape[1]
         st.Aeq = np.empty((len(eq_idx), w))
         st.Ain = np.empty((len(in_idx), w))
@@ -528,6 +541,8 @@ class HierarchySolver:
         st.din = np.empty(len(in_idx))
         st.lo_adj = np.empty(len(in_idx))
         st.hi_adj = np.empty(len(in_idx))
+        st.side = np.zeros(len(in_idx), dtype=np.int8)
+        st.side_wait = 0
 
     # -------------------------------------------------------------- equality path
     def _solve_equality(
@@ -756,6 +771,7 @@ class HierarchySolver:
         st.shortcut_ok = not qp_levels
         if box is not None:
             box.remember(stepper.x, self.eps)
+            self._remember_rows(st, x_aug)
         return self._result(
             st, parsed, x_aug, ranks, method, tuple(qp_levels), iterations, converged
         )
@@ -776,23 +792,38 @@ class HierarchySolver:
     def _solve_box(
         self, st: _Structure, parsed, stepper: NullspaceStepper, box: BoxActiveSet
     ) -> HierarchyResult | None:
-        """Fix the guessed active bounds, solve the equality rows below, verify (primal
+        """Fix the guessed active bounds, hold the inequality rows below level 0 guessed
+        at a bound (``st.side``) at it, solve the equality rows below, verify (primal
         and lexicographic dual); a few corrections; None if still not verified."""
         eps = self.eps
         n = self.n
         i_lower = st.eq_bounds[0][3]  # inequality rows of the levels below level 0
+        lower = i_lower < len(st.in_idx)
+        if lower and st.side_wait > 0:
+            # the last QP cascade left rows below level 0 violated: a level that cannot
+            # be met, which this path does not represent; tried again after a while
+            st.side_wait -= 1
+            return None
+        side = st.side
         for it in range(_BOX_ITERATIONS):
             W, values, s = box.fixed()
-            # a refusal on a corrected guess says little about the next calls
-            verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
+            G = np.flatnonzero(side) if lower else _NO_INDEX
             dual = None
-            if verdict is None:  # the shape does not allow one KKT solve: level by level
-                stepper.fix(W, values)
-                dual = DualCheck(n, W, s) if len(W) else None
-                ranks = self._box_steps(st, stepper, dual)
-                release = -1
-            else:
+            if len(G):
+                verdict = self._rows_kkt(st, stepper, W, values, s, G)
+                if verdict is None:
+                    return None
                 ranks, release = verdict
+            else:
+                # a refusal on a corrected guess says little about the next calls
+                verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
+                if verdict is None:  # the shape does not allow one KKT solve: level by level
+                    stepper.fix(W, values)
+                    dual = DualCheck(n, W, s) if len(W) else None
+                    ranks = self._box_steps(st, stepper, dual)
+                    release = -1
+                else:
+                    ranks, release = verdict
             x = stepper.x
             low = x < box.lo - eps
             high = x > box.hi + eps
@@ -804,19 +835,128 @@ class HierarchySolver:
                 dual.finish(x)
                 release = dual.worst if dual.failed else -1
             if release >= 0:  # a bound the optimum would leave: release it, try again
-                j = W[release]
-                box.at_lo[j] = box.at_hi[j] = False
+                if release < len(W):
+                    j = W[release]
+                    box.at_lo[j] = box.at_hi[j] = False
+                else:
+                    side[G[release - len(W)]] = 0
                 continue
-            if i_lower < len(st.in_idx):
+            if release == _UNDECIDED:  # held rows not pushed against: try without them
+                continue
+            if lower:
+                # the rows not held: within their bounds, else held at the one they cross
                 v = st.Ain[i_lower:] @ stepper.x_aug
-                if not (
-                    (v >= st.lo_adj[i_lower:] - eps).all()
-                    and (v <= st.hi_adj[i_lower:] + eps).all()
-                ):
-                    return None
-            method = "active-set" if len(W) else "shortcut"
+                below = v < st.loin[i_lower:] - eps
+                above = v > st.upin[i_lower:] + eps
+                if below.any() or above.any():
+                    side[i_lower:][below] = -1
+                    side[i_lower:][above] = 1
+                    continue
+            method = "active-set" if len(W) or len(G) else "shortcut"
             return self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
         return None
+
+    def _rows_kkt(
+        self,
+        st: _Structure,
+        stepper: NullspaceStepper,
+        W: np.ndarray,
+        values: np.ndarray,
+        s: np.ndarray,
+        G: np.ndarray,
+    ) -> tuple[np.ndarray, int] | None:
+        r"""The active-set path's solve when inequality rows below level 0 are held at a
+        bound: ``G`` (indices into ``st.Ain``) at the side ``st.side[G]`` (-1 lower, +1
+        upper). One KKT system (see :mod:`._kkt`): the fixed variables, the equality
+        rows of levels 1.. and the held rows at their bounds are met exactly; the last
+        level with rows is the least-squares one when the rows outnumber the variables,
+        else it is met too and the norm is minimised.
+
+        If the system is nonsingular, the free variables within the box and the other
+        inequality rows within their bounds (checked by the caller), every level above
+        the last has zero violation and the point minimises the last level (or the
+        norm) over the set they leave exactly when every held constraint's multiplier
+        has the sign that pushes against its bound: the rate ``-s_j mu_j`` of
+        :mod:`._kkt` is positive (``s_j = -side_j`` for a held row).
+
+        Returns ``(ranks, release)``: ``release`` the position in ``W`` then ``G`` of
+        the constraint with the most negative rate (-1: none); :data:`_UNDECIDED` when
+        held rows have a rate about zero (they are released: their bound may be left
+        at no cost, and the minimum norm decides). None: a held row on the
+        least-squares level, a singular or ill-conditioned system, or a fixed variable
+        not pushed against its bound.
+        """
+        if self._kkt_waiting(st):
+            return None
+        eb = st.eq_bounds
+        n = self.n
+        side = st.side[G]
+        level_of = st.in_level[G]
+        eq_levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
+        last = max(eq_levels[-1] if eq_levels else 0, int(level_of.max()))
+        Aeq = st.Aeq
+        e_first = eb[1][0]
+        e_last0, e_last1 = eb[last][0], eb[last][1]
+        rows = st.Ain[G]
+        # the held rows' targets: [a | -bound]; Ain's last column is -ref and the
+        # relative bounds are bound - ref
+        rows[:, n] -= np.where(side < 0, st.loin[G], st.upin[G])
+        count = len(W) + (e_last1 - e_first) + len(G)
+        if count <= n:
+            upper = np.concatenate([Aeq[e_first:e_last1], rows])
+            out = kkt_solve(upper, None, n, W, values)
+        elif (level_of == last).any():
+            return None
+        else:
+            upper = np.concatenate([Aeq[e_first:e_last0], rows])
+            out = kkt_solve(upper, Aeq[e_last0:e_last1], n, W, values)
+        if out is None:
+            st.kkt_wait = _KKT_RETRY
+            return None
+        x, mu = out
+        w = len(W)
+        rate = np.concatenate([-s * mu[:w], side * mu[w + (len(upper) - len(G)) :]])
+        judged = np.concatenate([s != 0.0, np.ones(len(G), dtype=bool)])
+        tol = DUAL_TOL * (1.0 + float(np.abs(rate).max()))
+        flat = judged & (np.abs(rate) <= tol)
+        release = -1
+        if (judged & (rate < -tol)).any():
+            release = int(np.argmin(np.where(judged, rate, np.inf)))
+        elif flat[:w].any():
+            return None  # a bound not pushed against: the level-by-level path decides
+        elif flat.any():
+            st.side[G[flat[w:]]] = 0
+            release = _UNDECIDED
+        stepper.reset()
+        stepper.set_point(x)
+        ranks = np.zeros(len(st.sizes), dtype=np.intp)
+        held = np.bincount(level_of, minlength=len(st.sizes))
+        used = w
+        for k in range(1, last + 1):
+            m = (eb[k][1] - eb[k][0]) + int(held[k])
+            if k == last and count > n:
+                ranks[k] = n - used
+            else:
+                ranks[k] = m
+                used += m
+        return ranks, release
+
+    def _remember_rows(self, st: _Structure, x_aug: np.ndarray) -> None:
+        """Take the inequality rows below level 0 at a bound in a cascade's solution as
+        the next guess of the rows held; rows it left violated (a level that cannot be
+        met) make the active-set path wait (:data:`_KKT_RETRY` calls)."""
+        i_lower = st.eq_bounds[0][3]
+        if i_lower == len(st.in_idx):
+            return
+        v = st.Ain[i_lower:] @ x_aug
+        lo, up = st.loin[i_lower:], st.upin[i_lower:]
+        tol = _HELD_TOL * (1.0 + np.abs(v))
+        side = st.side[i_lower:]
+        side.fill(0)
+        side[v <= lo + tol] = -1
+        side[v >= up - tol] = 1
+        if ((v < lo - tol) | (v > up + tol)).any():
+            st.side_wait = _KKT_RETRY
 
     def _box_kkt(
         self,
@@ -854,6 +994,7 @@ class HierarchySolver:
                 st.kkt_wait = _KKT_RETRY
             return None
         x, mu = out
+        mu = mu[: len(W)]
         release = -1
         if len(W):
             # releasing bound j changes the last objective at the rate -s_j mu_j
