@@ -263,12 +263,15 @@ def test_inequality_known_answer():
         (np.array([[1.0, 0.0, 0.0]]), np.array([0.5])),
         (np.array([[0.0, 0.0, 1.0]]), np.array([0.25]), np.array([np.inf])),
     ]
+    # both paths: the active-set one (the box, rows below it held at their bounds,
+    # level 1's row beyond its bound) and the QP cascade
     for backend in BACKENDS:
-        res = solve_hierarchy(levels, backend=backend)
-        np.testing.assert_allclose(res.x, [-1.0, -1.0, 0.25], atol=1e-7)
-        np.testing.assert_allclose(res.residuals, [0.0, 1.0, 1.5, 0.0], atol=1e-7)
-        assert list(res.satisfied) == [True, False, False, True]
-        assert res.method == "cascade"
+        for active_set, method in ((True, "active-set"), (False, "cascade")):
+            res = HierarchySolver(backend=backend, active_set=active_set).solve(levels)
+            np.testing.assert_allclose(res.x, [-1.0, -1.0, 0.25], atol=1e-7)
+            np.testing.assert_allclose(res.residuals, [0.0, 1.0, 1.5, 0.0], atol=1e-7)
+            assert list(res.satisfied) == [True, False, False, True]
+            assert res.method == method
 
 
 def test_infeasible_hard_level_returns_least_violating_point():

@@ -15,16 +15,18 @@ import pytest
 
 from reference_hierarchy import cascade_hierarchy, level_residuals
 from sotpy.solvers import HierarchySolver
-from sotpy.solvers import hierarchy as hierarchy_module
 
 QP_TOL = 1e-6
 
 
-def rows_stack(rng, t: float = 0.0, n: int = 20, infeasible: bool = False):
+def rows_stack(rng, t: float = 0.0, n: int = 20, infeasible: bool = False, conflict: bool = False):
     """A box on the last n - 3 variables (a floating base of 3), an inequality task of
     two-sided rows, equality levels, an inequality level with one-sided rows, and a
     posture with more rows than the variables the levels above leave. ``t`` drifts the
-    data smoothly (as from one control tick to the next)."""
+    data smoothly (as from one control tick to the next). ``infeasible``: two rows of
+    the inequality task whose intervals do not meet; ``conflict``: the first equality
+    level holds one row twice with two targets (a hand out of reach: no single KKT
+    solve, the path goes level by level)."""
     nb = n - 3
     box = np.zeros((nb, n))
     box[:, 3:] = np.eye(nb)
@@ -40,6 +42,9 @@ def rows_stack(rng, t: float = 0.0, n: int = 20, infeasible: bool = False):
     for m in (3, 2):
         A = rng.standard_normal((m, n)) + 0.1 * np.sin(t) * rng.standard_normal((m, n))
         b = rng.standard_normal(m)
+        if conflict and m == 3:
+            A[2] = A[1]
+            b[2] = b[1] + 0.5
         levels.append((A, b, b.copy()))
     D = rng.standard_normal((2, n))
     levels.append((D, np.full(2, -np.inf), np.full(2, 0.1 + 0.05 * np.sin(t))))
@@ -94,31 +99,71 @@ def test_held_rows_are_used_and_verified():
     assert seen >= 10
 
 
-def test_infeasible_level_below_the_box_goes_to_the_cascade_and_waits():
-    """A level that cannot be met: not representable by held rows; the cascade answers
-    and the path is not retried at every call."""
-    seq = _stack_sequence(907, 6, infeasible=True)
+def test_a_level_below_the_box_that_cannot_be_met_is_held_level_by_level():
+    """Two rows of the inequality task whose intervals do not meet: the level is solved
+    in the least-squares sense with both held at their bounds (violated, each pushing
+    its own way), level by level; the reference cascade's answer, mostly without QP."""
     solver = HierarchySolver()
-    calls = {"n": 0}
-    real = solver._rows_kkt
-
-    def spy(*args):
-        calls["n"] += 1
-        return real(*args)
-
-    solver._rows_kkt = spy
-    for levels in seq:
+    methods = []
+    for levels in _stack_sequence(907, 12, infeasible=True):
         res = solver.solve(levels)
         _check(levels, res)
         assert res.residuals[1] > 1e-3  # the level's conflict is reported
-    assert calls["n"] <= 2 * hierarchy_module._BOX_ITERATIONS
+        methods.append(res.method)
+    assert methods[1:].count("active-set") >= 8, methods
 
 
+def _run_conflict(seed, ticks=15):
+    """The conflicting sequence of ``seed``; returns the methods and how many calls
+    carried a held row's release direction down to the levels below."""
+    solver = HierarchySolver()
+    methods = []
+    judged = 0
+    real = solver._rows_steps
+
+    def spy(st, stepper, dual, G):
+        nonlocal judged
+        out = real(st, stepper, dual, G)
+        judged += len(dual.idx) > len(np.flatnonzero(dual.W >= 0))
+        return out
+
+    solver._rows_steps = spy
+    for levels in _stack_sequence(940 + seed, ticks, conflict=True):
+        res = solver.solve(levels)
+        _check(levels, res)
+        assert res.residuals[2] > 0.1  # the conflict
+        methods.append(res.method)
+    return methods, judged
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_held_rows_above_a_conflicting_level_match_the_reference(seed):
+    """A conflicting equality level below the inequality task: no single KKT solve;
+    level by level, held rows met exactly are judged by the levels below (their
+    release directions carried down as the fixed variables' are). The reference
+    cascade's answer, mostly without QP."""
+    methods, _ = _run_conflict(seed)
+    assert methods[1:].count("active-set") >= 10, methods
+
+
+def test_release_directions_of_held_rows_are_used():
+    """Over these sequences the level-by-level path does judge held rows met exactly
+    (not only fixed variables and rows beyond their bounds)."""
+    assert sum(_run_conflict(seed, 8)[1] for seed in range(4)) >= 3
+
+
+@pytest.mark.parametrize("variant", ["plain", "conflict", "infeasible"])
 @pytest.mark.parametrize("seed", range(6))
-def test_wrong_held_rows_are_released(seed):
+def test_wrong_held_rows_are_released(seed, variant):
     """Every row below the box guessed held, at a random side: the verification
-    releases or refuses the wrong ones, and the answer is the reference's."""
-    levels = rows_stack(np.random.default_rng(920 + seed))
+    releases or refuses the wrong ones, and the answer is the reference's (one KKT
+    solve; level by level above a conflicting level; a level whose rows cannot all be
+    met, where a row held at the wrong bound is pulled inside its interval)."""
+    levels = rows_stack(
+        np.random.default_rng(920 + seed),
+        conflict=variant == "conflict",
+        infeasible=variant == "infeasible",
+    )
     solver = HierarchySolver()
     solver.solve(levels)
     st = solver._structure
@@ -131,11 +176,12 @@ def test_wrong_held_rows_are_released(seed):
     _check(levels, res)
 
 
-def test_a_wrong_sign_multiplier_is_refused(monkeypatch):
-    """Mutation check of the dual test: a held row whose multiplier says "leave the
-    bound" must not be accepted. With the sign test switched off, a wrong guess is
-    accepted and the answer is wrong; with it, the answer is right."""
-    levels = rows_stack(np.random.default_rng(931))
+@pytest.mark.parametrize("conflict", [False, True])
+def test_a_held_row_inside_its_interval_is_released(conflict):
+    """A row that is strictly inside its interval at the optimum, guessed held at its
+    nearer bound: the multiplier test (one KKT solve) or the level's own verdict and
+    the release directions (level by level) must release it."""
+    levels = rows_stack(np.random.default_rng(931), conflict=conflict)
     x_ref, _ = cascade_hierarchy(levels)
     solver = HierarchySolver()
     solver.solve(levels)
@@ -150,3 +196,20 @@ def test_a_wrong_sign_multiplier_is_refused(monkeypatch):
     st.side[j] = 1 if v[j - i_lower] > 0.5 * (st.loin[j] + st.upin[j]) else -1
     res = solver.solve(levels)
     np.testing.assert_allclose(res.x, x_ref, atol=1e-5)
+
+
+@pytest.mark.parametrize(("seed", "variant"), [(31, "conflict"), (62, "infeasible")])
+def test_levels_after_every_direction_is_used_judge_with_their_true_violation(seed, variant):
+    """8 variables: the levels above the last inequality level use every direction.
+    A row of that level guessed held at a bound it is far inside of must not count in
+    the level's verdict on the held rows above (it once made a wrong guess pass)."""
+    solver = HierarchySolver()
+    for t in (0.0, 0.9):
+        levels = rows_stack(
+            np.random.default_rng(seed),
+            t,
+            n=8,
+            conflict=variant == "conflict",
+            infeasible=variant == "infeasible",
+        )
+        _check(levels, solver.solve(levels))

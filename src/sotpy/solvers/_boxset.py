@@ -135,10 +135,11 @@ class DualCheck:
     in ``W``; a bound leaves both when it is decided.
     """
 
-    __slots__ = ("D", "failed", "idx", "worst")
+    __slots__ = ("D", "W", "failed", "idx", "worst")
 
     def __init__(self, n: int, W: np.ndarray, s: np.ndarray) -> None:
         idx = np.flatnonzero(s)  # bounds that coincide are never released
+        self.W = W
         self.idx = idx
         self.D = np.zeros((n, len(idx)))
         self.D[W[idx], np.arange(len(idx))] = s[idx]
@@ -213,6 +214,28 @@ class DualCheck:
         D -= basis @ (C * ~blocked)
         if blocked.any():
             self._drop(blocked)
+
+    def add(self, A: np.ndarray, basis: np.ndarray, rows: np.ndarray, s: np.ndarray, ids) -> bool:
+        """New constraints to judge from the next level on: rows ``rows`` of a level just
+        solved (``A``, its rows; ``basis`` spans the directions it was solved in), held
+        at a bound, each to be moved by ``s`` (into its interval) while the level's
+        other rows keep their values: ``d = basis c``, ``A basis c = s_i e_i`` (any
+        solution: the levels below judge ``d`` up to the level's null space, along
+        which their objective is stationary). ``ids`` are the positions reported by
+        :attr:`worst`. False when a row cannot move alone (it depends on the others
+        there): its verdict is not defined by one direction."""
+        if not len(rows):
+            return True
+        M = A @ basis
+        T = np.zeros((A.shape[0], len(rows)))
+        T[rows, np.arange(len(rows))] = s
+        C = _lstsq(M, T, rcond=None)[0]
+        miss = M @ C - T
+        if float(np.abs(miss).max()) > 1e-9 * (1.0 + float(np.abs(M).max())):
+            return False
+        self.D = np.concatenate([self.D, basis @ C], axis=1)
+        self.idx = np.concatenate([self.idx, ids])
+        return True
 
     def finish(self, x: np.ndarray) -> None:
         """The minimum-norm criterion for the bounds still undecided: ``x^T d >= 0``."""

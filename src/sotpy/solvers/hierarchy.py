@@ -58,8 +58,9 @@ Solution paths
   (the previous call's) are fixed, the equality rows below solved by the null-space
   recursion, and the guess verified (primal feasibility, lexicographic multipliers),
   corrected a few times if needed; no QP. Inequality rows of the levels below guessed
-  at a bound are held there too (one KKT solve, their multipliers verified) when the
-  levels above the last can be met exactly;
+  at a bound are held there too (one KKT solve, their multipliers verified, when the
+  levels above the last can be met exactly; else level by level, a held row judged by
+  its own level's residual or, when met, by the levels below);
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
@@ -226,7 +227,6 @@ class _Structure:
         "rup",
         "shortcut_ok",
         "side",
-        "side_wait",
         "sizes",
         "slices",
         "starts",
@@ -542,7 +542,6 @@ class HierarchySolver:
         st.lo_adj = np.empty(len(in_idx))
         st.hi_adj = np.empty(len(in_idx))
         st.side = np.zeros(len(in_idx), dtype=np.int8)
-        st.side_wait = 0
 
     # -------------------------------------------------------------- equality path
     def _solve_equality(
@@ -799,11 +798,6 @@ class HierarchySolver:
         n = self.n
         i_lower = st.eq_bounds[0][3]  # inequality rows of the levels below level 0
         lower = i_lower < len(st.in_idx)
-        if lower and st.side_wait > 0:
-            # the last QP cascade left rows below level 0 violated: a level that cannot
-            # be met, which this path does not represent; tried again after a while
-            st.side_wait -= 1
-            return None
         side = st.side
         for it in range(_BOX_ITERATIONS):
             W, values, s = box.fixed()
@@ -811,8 +805,12 @@ class HierarchySolver:
             dual = None
             if len(G):
                 verdict = self._rows_kkt(st, stepper, W, values, s, G)
-                if verdict is None:
-                    return None
+                if verdict is None:  # level by level, the held rows with each level
+                    stepper.reset()
+                    stepper.fix(W, values)
+                    verdict = self._rows_steps(st, stepper, DualCheck(n, W, s), G)
+                    if verdict is None:
+                        return None
                 ranks, release = verdict
             else:
                 # a refusal on a corrected guess says little about the next calls
@@ -845,9 +843,12 @@ class HierarchySolver:
                 continue
             if lower:
                 # the rows not held: within their bounds, else held at the one they cross
+                # (held rows were judged with their level: met, or beyond their bound
+                # because their level cannot meet them)
                 v = st.Ain[i_lower:] @ stepper.x_aug
-                below = v < st.loin[i_lower:] - eps
-                above = v > st.upin[i_lower:] + eps
+                free = side[i_lower:] == 0
+                below = free & (v < st.loin[i_lower:] - eps)
+                above = free & (v > st.upin[i_lower:] + eps)
                 if below.any() or above.any():
                     side[i_lower:][below] = -1
                     side[i_lower:][above] = 1
@@ -941,22 +942,99 @@ class HierarchySolver:
                 used += m
         return ranks, release
 
+    def _rows_steps(
+        self, st: _Structure, stepper: NullspaceStepper, dual: DualCheck, G: np.ndarray
+    ) -> tuple[np.ndarray, int] | None:
+        """The active-set path level by level with held rows (the fixed variables
+        already fixed in ``stepper``): each level's equality rows and its held rows at
+        their bounds are solved together (least squares inside the level). Then for a
+        held row, with ``r_i = a_i x - bound_i`` and ``side_i`` its bound (-1, +1):
+
+        - ``side_i r_i > 0``: the level cannot meet it; its own multiplier (the slack)
+          has the right sign, and it is pinned at that value below, as the row is;
+        - ``side_i r_i < 0``: the level pulls it inside: released (the returned
+          ``release``, a position in ``W`` then ``G``);
+        - ``r_i = 0``: the levels below judge it, as the fixed variables: its release
+          direction ``d`` (``a_i d = s_i = -side_i``, the level's other rows kept, in
+          the directions the level was solved in) joins ``dual``. On the last level it
+          needs a unique optimum there.
+
+        Returns ``(ranks, release)`` (release -1: none), or None: a held row met
+        exactly that cannot move without the level's other rows, or met on a last
+        level without a unique optimum.
+        """
+        eb = st.eq_bounds
+        n, eps = self.n, self.eps
+        side = st.side
+        level_of = st.in_level[G]
+        levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0] or (level_of == k).any()]
+        ranks = np.zeros(len(st.sizes), dtype=np.intp)
+        last = levels[-1]
+        Aeq, fro, tol = st.Aeq, self._fro, self.rank_tol
+        w = len(dual.W)
+        for k in levels:
+            e0, e1 = eb[k][0], eb[k][1]
+            pos = np.flatnonzero(level_of == k)
+            held = G[pos]
+            rows = st.Ain[held]
+            bound = np.where(side[held] < 0, st.loin[held], st.upin[held])
+            rows[:, n] -= bound
+            if e1 > e0:
+                rows = np.concatenate([Aeq[e0:e1], rows])
+            c0, nf = stepper.c0, stepper.nf
+            judge = dual.pending
+            r = stepper.step(rows, fro[k], tol, 0.0, k != last)
+            ranks[k] = r
+            m_eq = e1 - e0
+            if len(held):
+                res = rows[m_eq:] @ stepper.x_aug  # a_i x - bound_i
+                thr = 10.0 * eps * (1.0 + np.abs(bound))
+                sgn = side[held] * res
+                inward = sgn < -thr
+                if inward.any():
+                    if nf > 0:  # the level's solution leans on a bound it should not
+                        return ranks, w + int(pos[int(np.argmin(sgn))])
+                    # nothing moved (no direction left): the rows are simply not held,
+                    # and they do not count in the level's violation
+                    side[held[inward]] = 0
+                    keep = np.ones(len(rows), dtype=bool)
+                    keep[m_eq:] = ~inward
+                    rows = rows[keep]
+            if judge:  # (also when no direction is left: the level may still decide)
+                rank = r if k != last else -1
+                dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr)
+            if not len(held) or nf == 0:
+                continue  # (nothing left to move: the point is the only one)
+            tight = np.abs(res) <= thr
+            if not tight.any():
+                continue
+            if k == last:
+                if r < nf:
+                    return None  # several optima: the minimum norm would decide
+                continue
+            if not dual.failed and not dual.add(
+                rows[:, :n],
+                stepper.w[:n, c0:n],
+                (e1 - e0) + np.flatnonzero(tight),
+                -side[held[tight]].astype(float),
+                w + pos[tight],
+            ):
+                return None
+        dual.finish(stepper.x)
+        return ranks, (dual.worst if dual.failed else -1)
+
     def _remember_rows(self, st: _Structure, x_aug: np.ndarray) -> None:
-        """Take the inequality rows below level 0 at a bound in a cascade's solution as
-        the next guess of the rows held; rows it left violated (a level that cannot be
-        met) make the active-set path wait (:data:`_KKT_RETRY` calls)."""
+        """Take the inequality rows below level 0 at or beyond a bound in a cascade's
+        solution as the next guess of the rows held (at that bound)."""
         i_lower = st.eq_bounds[0][3]
         if i_lower == len(st.in_idx):
             return
         v = st.Ain[i_lower:] @ x_aug
-        lo, up = st.loin[i_lower:], st.upin[i_lower:]
         tol = _HELD_TOL * (1.0 + np.abs(v))
         side = st.side[i_lower:]
         side.fill(0)
-        side[v <= lo + tol] = -1
-        side[v >= up - tol] = 1
-        if ((v < lo - tol) | (v > up + tol)).any():
-            st.side_wait = _KKT_RETRY
+        side[v <= st.loin[i_lower:] + tol] = -1
+        side[v >= st.upin[i_lower:] - tol] = 1
 
     def _box_kkt(
         self,
