@@ -132,7 +132,9 @@ class DualCheck:
     """The release directions of the undecided bounds and the verdict, level by level.
 
     ``D`` (``n x u``) holds one direction per undecided bound, ``idx`` their positions
-    in ``W``; a bound leaves both when it is decided.
+    in ``W`` (then, for inequality rows held at a bound below level 0, added by
+    :meth:`add`, positions in the caller's list of held rows offset by ``len(W)``); a
+    bound leaves both when it is decided.
     """
 
     __slots__ = ("D", "W", "failed", "idx", "worst")
