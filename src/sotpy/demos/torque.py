@@ -30,7 +30,7 @@ def run_panda_torque(
     """
     from ..dynamics import load_robot
     from ..graph import plug
-    from ..solvers.controller import Controller, JointServo, MinJerk, PoseServo
+    from ..solvers.controller import Controller, JointServo
 
     robot = load_robot("panda", prefix=prefix)
     device, dyn = robot.device, robot.dynamic
@@ -44,16 +44,9 @@ def run_panda_torque(
     ctrl.addJointVelocityLimits("vlim", 0.02)
     ctrl.setResolutionStrategy(strategy)
 
-    traj = MinJerk(f"{prefix}_traj")
-    traj.dt.value = dt
-    servo = PoseServo(f"{prefix}_servo")
-    servo.Kp.value = np.full(6, 400.0)
-    plug(ctrl.eePose, servo.position)
-    plug(ctrl.eeVelocity, servo.velocity)
-    plug(traj.pose, servo.reference)
-    plug(traj.velocity, servo.referenceVelocity)
-    plug(traj.acceleration, servo.referenceAcceleration)
-    plug(servo.desiredAcceleration, ctrl.ee)
+    traj = _servoed_pose(
+        f"{prefix}_traj", f"{prefix}_servo", dt, 400.0, ctrl, "ee", "eePose", "eeVelocity"
+    )
     jservo = JointServo(f"{prefix}_jservo")
     q0 = robot.halfSitting.copy()
     plug(ctrl.jointPosition, jservo.position)
@@ -171,7 +164,7 @@ def run_talos_torque(
     from ..errors import SotpyError
     from ..graph import plug
     from ..operators import MatrixHomoToPose, Selec_of_vector
-    from ..solvers.controller import ComServo, Controller, JointServo, MinJerk, PoseServo
+    from ..solvers.controller import ComServo, Controller, JointServo, MinJerk
 
     if side not in ("left", "right"):
         raise SotpyError(f"run_talos_torque: side must be 'left' or 'right', got {side!r}")
@@ -231,16 +224,16 @@ def run_talos_torque(
     plug(com_servo.desiredAcceleration, ctrl.comTask)
 
     # right hand
-    hand_traj = MinJerk(f"{prefix}_handTraj")
-    hand_traj.dt.value = dt
-    hand_servo = PoseServo(f"{prefix}_handServo")
-    hand_servo.Kp.value = np.full(6, 100.0)
-    plug(ctrl.handPose, hand_servo.position)
-    plug(ctrl.handVelocity, hand_servo.velocity)
-    plug(hand_traj.pose, hand_servo.reference)
-    plug(hand_traj.velocity, hand_servo.referenceVelocity)
-    plug(hand_traj.acceleration, hand_servo.referenceAcceleration)
-    plug(hand_servo.desiredAcceleration, ctrl.hand)
+    hand_traj = _servoed_pose(
+        f"{prefix}_handTraj",
+        f"{prefix}_handServo",
+        dt,
+        100.0,
+        ctrl,
+        "hand",
+        "handPose",
+        "handVelocity",
+    )
     hand0 = pin.SE3(ctrl.handPose.value)
     hand_goal = pin.SE3(hand0.rotation, hand0.translation + np.asarray(hand_offset, float))
     hand_traj.setTrajectory(hand0, hand_goal, duration, 0)
@@ -432,3 +425,23 @@ def run_callbacks(
         device.increment(dt)
         limit -= 1
     return lines
+
+
+def _servoed_pose(traj_name, servo_name, dt, kp, ctrl, task, pose, velocity):
+    """A minimum-jerk trajectory followed by a pose servo (gains ``kp`` on every axis)
+    that drives the controller's Cartesian task ``task`` from its ``pose`` and
+    ``velocity`` outputs; returns the trajectory (the caller sets it)."""
+    from ..graph import plug
+    from ..solvers.controller import MinJerk, PoseServo
+
+    traj = MinJerk(traj_name)
+    traj.dt.value = dt
+    servo = PoseServo(servo_name)
+    servo.Kp.value = np.full(6, kp)
+    plug(getattr(ctrl, pose), servo.position)
+    plug(getattr(ctrl, velocity), servo.velocity)
+    plug(traj.pose, servo.reference)
+    plug(traj.velocity, servo.referenceVelocity)
+    plug(traj.acceleration, servo.referenceAcceleration)
+    plug(servo.desiredAcceleration, getattr(ctrl, task))
+    return traj

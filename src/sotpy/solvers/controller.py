@@ -505,6 +505,18 @@ class Controller(Entity):
         return self._last
 
 
+#: the servos' inputs, in the order their ``desiredAcceleration`` reads them
+_SERVO_INPUTS = (
+    "position",
+    "velocity",
+    "reference",
+    "referenceVelocity",
+    "referenceAcceleration",
+    "Kp",
+    "Kd",
+)
+
+
 class PoseServo(Entity):
     """PD on a pose: ``a_des = a_ff - Kp (p - p_d, log3(R R_d^T)) - Kd (nu - nu_d)``
     (world axes; see :mod:`sotpy.solvers.wbc.servos`)."""
@@ -517,18 +529,7 @@ class PoseServo(Entity):
     Kp = Input(VECTOR, default=np.full(6, 100.0), doc="proportional gains (6, 1/s^2)")
     Kd = Input(VECTOR, default=np.zeros(0), doc="derivative gains (6, 1/s); empty: 2 sqrt(Kp)")
 
-    @Output(
-        VECTOR,
-        deps=(
-            "position",
-            "velocity",
-            "reference",
-            "referenceVelocity",
-            "referenceAcceleration",
-            "Kp",
-            "Kd",
-        ),
-    )
+    @Output(VECTOR, deps=_SERVO_INPUTS)
     def desiredAcceleration(self, M, nu, Md, nud, ad, Kp, Kd) -> np.ndarray:
         """Desired acceleration (6, world axes)."""
         kp, kd = check_gains(f"{self.className}({self.name})", Kp, Kd, 6)
@@ -557,18 +558,7 @@ class _VectorServo(Entity):
     Kp = Input(VECTOR, default=np.full(1, 100.0), doc="proportional gains (one or per axis)")
     Kd = Input(VECTOR, default=np.zeros(0), doc="derivative gains; empty: 2 sqrt(Kp)")
 
-    @Output(
-        VECTOR,
-        deps=(
-            "position",
-            "velocity",
-            "reference",
-            "referenceVelocity",
-            "referenceAcceleration",
-            "Kp",
-            "Kd",
-        ),
-    )
+    @Output(VECTOR, deps=_SERVO_INPUTS)
     def desiredAcceleration(self, x, v, xd, vd, ad, Kp, Kd) -> np.ndarray:
         """``a_d - Kp (x - x_d) - Kd (v - v_d)``."""
         n = len(x)
