@@ -1,8 +1,9 @@
 """The one-KKT-solve path (sotpy.solvers._kkt): used when every level but the last is of
 full row rank (the usual SOT tick), checked against the independent references, and
 refused (the null-space recursion answers) when the system is ill-conditioned. For
-equality-only stacks it belongs to the NumPy path (``jit=False``); on the box path it is
-used either way."""
+equality-only stacks and on the box path it belongs to the NumPy path (``jit=False``):
+the compiled paths solve these stacks in one call of their own (tested in
+``test_hierarchy_jit.py`` and ``test_hierarchy_boxkkt.py``)."""
 
 from __future__ import annotations
 
@@ -100,7 +101,7 @@ def test_box_stacks_of_the_usual_shape_use_one_kkt_solve(kkt_calls):
         box = (np.eye(n), -rng.uniform(0.2, 1.5, n), rng.uniform(0.2, 1.5, n))
         levels = [box] + [(A, b, b) for A, b in full_rank_stack(rng, n)]
         x_ref, optimal = cascade_hierarchy(levels)
-        solver = HierarchySolver()
+        solver = HierarchySolver(jit=False)
         solver.solve(levels)
         before = kkt_calls["ok"]
         res = solver.solve(levels)
@@ -122,7 +123,7 @@ def test_wrong_bound_is_released_by_its_multiplier(kkt_calls):
     last = (np.eye(n), np.array([0.5, -0.2, 0.3, 0.1]))
     levels = [box, (np.ones((1, n)), np.array([0.7]), np.array([0.7])), (*last, last[1])]
     x_ref, _ = cascade_hierarchy(levels)
-    solver = HierarchySolver()
+    solver = HierarchySolver(jit=False)
     solver.solve(levels)
     solver._structure.box.at_hi[0] = True  # a wrong guess: x_0 held at 1
     res = solver.solve(levels)
@@ -141,7 +142,7 @@ def test_refused_shape_is_not_retried_every_call(kkt_calls):
     b = rng.standard_normal(n - 6)
     levels = [(np.eye(n), -np.ones(n), np.ones(n)), (posture, b, b)]
     x_ref, _ = cascade_hierarchy(levels)
-    solver = HierarchySolver()
+    solver = HierarchySolver(jit=False)
     for _ in range(10):
         res = solver.solve(levels)
         np.testing.assert_allclose(res.x, x_ref, atol=1e-6)

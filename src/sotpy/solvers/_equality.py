@@ -168,7 +168,7 @@ class NullspaceStepper:
         scratch = not self.identity or self.moved
         maug = self.reduced(rows) if scratch else rows
         thr = rank_tol * scale
-        if not need_basis and not freeze and m > nf and damping == 0.0:
+        if not need_basis and not freeze and not full_rank_only and m > nf and damping == 0.0:
             r = self._last_least_squares(maug, m, nf, thr)
             if r >= 0:
                 return r

@@ -86,11 +86,11 @@ from sotpy._blas import limit_blas_threads
 from sotpy._jit import refused
 from sotpy.errors import SolverError
 
-from . import _eqkernel
+from . import _boxkkt, _eqkernel
 from ._boxset import DUAL_TOL, BoxActiveSet, DualCheck
 from ._cascade import DaqpQP, ProxQP, daqp_available
 from ._equality import NullspaceStepper
-from ._kkt import kkt_solve
+from ._kkt import RCOND_MIN, kkt_solve
 
 __all__ = [
     "HierarchyResult",
@@ -307,6 +307,7 @@ class HierarchySolver:
         self.jit = _eqkernel.equality_stack is not None if jit is None else bool(jit)
         if self.jit:
             _eqkernel.warm_up()
+            _boxkkt.warm_up()
         self._stepper: NullspaceStepper | None = None
         self._structure: _Structure | None = None
         self._qp_class = DaqpQP if backend == "daqp" else ProxQP
@@ -697,6 +698,15 @@ class HierarchySolver:
         eps = self.eps
         tol = self.rank_tol
         fro = self._fro
+        box = None
+        if self.shortcut and self.active_set and not any(lams):
+            # undamped only: damped, each level's point depends on the path (x_{k-1}),
+            # and a bound may be active at one level and not at another
+            box = self._box(st)
+            if box is not None:
+                result = self._box_compiled(st, parsed, box)
+                if result is not None:
+                    return result
         Aeq, Ain = st.Aeq, st.Ain
         if len(st.eq_idx):
             np.take(st.A, st.eq_idx, axis=0, out=Aeq)
@@ -706,16 +716,11 @@ class HierarchySolver:
         lo_adj, hi_adj = st.lo_adj, st.hi_adj
         np.copyto(lo_adj, st.loin)
         np.copyto(hi_adj, st.upin)
-        box = None
-        if self.shortcut and self.active_set and not any(lams):
-            # undamped only: damped, each level's point depends on the path (x_{k-1}),
-            # and a bound may be active at one level and not at another
-            box = self._box(st)
-            if box is not None:
-                result = self._solve_box(st, parsed, stepper, box)
-                if result is not None:
-                    return result
-                stepper.reset()
+        if box is not None:
+            result = self._solve_box(st, parsed, stepper, box)
+            if result is not None:
+                return result
+            stepper.reset()
         ranks = np.zeros(len(st.sizes), dtype=np.intp)
         x_aug = stepper.x_aug
         if self.shortcut and st.shortcut_ok and box is None:
@@ -787,6 +792,41 @@ class HierarchySolver:
         if not box.set_box(st.A[:s1, : self.n], st.lo[:s1], st.up[:s1], self.jit):
             return None
         return box
+
+    def _box_compiled(self, st: _Structure, parsed, box: BoxActiveSet) -> HierarchyResult | None:
+        """The box path as one compiled call (:func:`._boxkkt.box_kkt`) when every row
+        below level 0 is an equality row; None when it does not apply or cannot prove
+        its answer (then :meth:`_solve_box` goes on from the guess it corrected)."""
+        if _boxkkt.box_kkt is None or not self.jit or st.kkt_wait > 0:
+            return None
+        s1 = st.starts[1]
+        if st.eq_bounds[0][3] != len(st.in_idx) or st.last < 1:
+            return None  # inequality rows below level 0, or nothing below it
+        try:
+            status, x_aug, res, minnorm, nf, m_upper, its = _boxkkt.box_kkt(
+                st.A, s1, st.starts[st.last], st.starts64, st.rlo, st.rup, box.lo, box.hi,
+                box.at_lo, box.at_hi, self.eps, RCOND_MIN, DUAL_TOL, _BOX_ITERATIONS,
+            )  # fmt: skip
+        except TypeError as exc:
+            self._stop_jit(exc)
+            return None
+        if status != _boxkkt.OK:
+            if status == _boxkkt.REFUSED and its == 0:
+                # refused on the previous call's guess: the shape itself (a corrected
+                # guess that fixes too many variables says little about the next calls)
+                st.kkt_wait = _KKT_RETRY
+            return None
+        sizes = st.sizes
+        ranks = np.zeros(len(sizes), dtype=np.intp)
+        ranks[1:] = sizes[1:]
+        if not minnorm:
+            ranks[st.last] = nf - m_upper
+        n = self.n
+        method = "active-set" if nf < n else "shortcut"
+        out = HierarchyResult(x_aug[:n], res, ranks, method, (), 0, True, self._fro, self.eps)
+        if not math.isfinite(out.xnorm + float(res.sum())):
+            return None  # the NumPy path reports what is not finite
+        return out
 
     def _solve_box(
         self, st: _Structure, parsed, stepper: NullspaceStepper, box: BoxActiveSet

@@ -1,0 +1,285 @@
+r"""The box path of the SOT's usual stack as one compiled call (internal to
+``sotpy.solvers``).
+
+The stack an SOT solves at most ticks is a box (the joint limits) above equality levels
+whose upper levels are met exactly and whose last level (the posture) is a least-squares
+fit, or whose levels are all met exactly. :func:`box_kkt` runs the whole active-set
+iteration of :mod:`._boxset` for that shape in one call: fix the variables guessed at a
+bound, solve, check the bounds and the multipliers, correct the guess, repeat; the
+residual of every level last. It answers only when it can prove the answer, else it
+returns a status and the caller runs the general NumPy path from the corrected guess.
+
+The solve, with ``F`` the free variables (``W`` the fixed ones, at their bound values),
+``U`` the upper levels' rows and ``L`` the last level's, restricted to ``F`` (the fixed
+variables moved to the right-hand sides ``d`` and ``c``):
+
+.. math::
+
+    \min_{x_F} \tfrac12 \|L x_F - c\|^2 \quad \text{s.t.} \quad U x_F = d
+
+by the null-space method: ``U^T = Q [R; 0]`` (``dgeqrf``), ``x_F = Q [y_1; y_2]`` with
+``R^T y_1 = d`` and ``y_2`` the least-squares solution of ``(L Q_2) y_2 = c - L Q_1 y_1``
+(``dgeqrf`` of ``L Q_2``; ``L Q`` by ``dormqr``). When every level fits in the free
+directions (``m_U + m_L <= |F|``) all of them go into ``U`` and the point is the
+minimum-norm solution ``x_F = Q_1 R^{-T} d``. Either way the answer is the unique
+lexicographic optimum with ``W`` fixed when ``R`` (``U`` of full row rank) and ``L Q_2``
+(``L`` of full column rank on the null space of ``U``) are well conditioned; the call is
+refused otherwise (the null-space recursion's rank threshold decides then). The
+conditions, with LAPACK's 1-norm estimate ``dtrcon``: ``rcond(R) >= RCOND_MIN`` and
+``rcond(L Q_2)^2 >= RCOND_MIN`` (the reduced Hessian ``(L Q_2)^T (L Q_2)`` is what the
+one-system KKT solve of :mod:`._kkt` conditions on), with :data:`._kkt.RCOND_MIN`.
+
+The multipliers: with ``g`` the gradient of the last objective at ``x`` (``L^T (L x -
+c)``, or ``x`` for the minimum norm), ``U_F^T \mu_U = -g_F`` gives ``\mu_U = -R^{-1}
+(Q^T g_F)_{1..m_U}`` and the fixed variables' rows ``\mu_W = -(g_W + U_W^T \mu_U)``;
+releasing bound ``j`` changes the last objective at the rate ``-s_j \mu_j`` (``s_j`` the
+direction into the box), exactly as in :func:`._kkt.kkt_solve`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import ENABLED
+
+box_kkt = None
+_compiled = None  # the kernel itself (box_kkt may be wrapped, e.g. by a test's spy)
+_warm: list[bool] = []
+
+#: :func:`box_kkt`'s statuses
+OK, REFUSED, UNDECIDED, NOT_CONVERGED = 0, 1, 2, 3
+
+
+if ENABLED:  # pragma: no branch - the environment decides
+    import numba as _nb
+
+    from ._eqkernel import _L, _N, _R, _T, _external, _ormqr, _residuals, _trtrs_upper
+
+    _dgeqrf = _external("dgeqrf", 8)
+    _dtrcon = _external("dtrcon", 10)
+    _O = ord("1")
+
+    @_nb.njit(cache=True, nogil=True)
+    def _geqrf(a, tau, work, iw):  # pragma: no cover - compiled
+        """QR in place of the Fortran array ``a`` (no pivoting)."""
+        iw[0] = a.shape[0]
+        iw[1] = a.shape[1]
+        iw[2] = max(a.shape[0], 1)
+        iw[3] = work.shape[0]
+        _dgeqrf(
+            iw[0:].ctypes, iw[1:].ctypes, a.ctypes, iw[2:].ctypes, tau.ctypes,
+            work.ctypes, iw[3:].ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _rcond_upper(a, k, work, iwork, iw, ch):  # pragma: no cover - compiled
+        """Reciprocal condition number (1-norm estimate) of the upper triangle of the
+        leading ``k x k`` block of the Fortran array ``a``."""
+        ch[0] = _O
+        ch[1] = ord("U")
+        ch[2] = _N
+        iw[0] = k
+        iw[1] = max(a.shape[0], 1)
+        rc = np.zeros(1)
+        _dtrcon(
+            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, a.ctypes,
+            iw[1:].ctypes, rc.ctypes, work.ctypes, iwork.ctypes, iw[2:].ctypes,
+        )  # fmt: skip
+        if iw[2] != 0:
+            return 0.0
+        return rc[0]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _box_kkt(
+        A,
+        s1,
+        split,
+        starts,
+        rlo,
+        rup,
+        blo,
+        bhi,
+        at_lo,
+        at_hi,
+        eps,
+        rcond_min,
+        dual_tol,
+        max_iter,
+    ):  # pragma: no cover - compiled
+        """See :func:`box_kkt`."""
+        m = A.shape[0]
+        n = A.shape[1] - 1
+        x_aug = np.ones(n + 1)
+        work = np.empty(64 * (n + m + 2))
+        iwork = np.empty(max(n, 1), dtype=np.int32)
+        iw = np.zeros(8, dtype=np.int32)
+        ch = np.zeros(3, dtype=np.uint8)
+        res = np.zeros(starts.shape[0] - 1)
+        for it in range(max_iter):
+            w = 0
+            for j in range(n):
+                if at_lo[j] or at_hi[j]:
+                    w += 1
+            nf = n - w
+            W = np.empty(w, dtype=np.int64)
+            F = np.empty(nf, dtype=np.int64)
+            vals = np.empty(w)
+            s = np.empty(w)
+            a = 0
+            b = 0
+            for j in range(n):
+                if at_lo[j] or at_hi[j]:
+                    W[a] = j
+                    vals[a] = blo[j] if at_lo[j] else bhi[j]
+                    s[a] = 0.0 if blo[j] == bhi[j] else (1.0 if at_lo[j] else -1.0)
+                    a += 1
+                else:
+                    F[b] = j
+                    b += 1
+            minnorm = m - s1 <= nf
+            u_end = m if minnorm else split
+            mu_ = u_end - s1
+            ml = m - u_end
+            if mu_ > nf or (not minnorm and ml < nf - mu_):
+                return REFUSED, x_aug, res, minnorm, nf, mu_, it
+            # U_F^T (nf x m_U, Fortran) and d = b_U - U_W x_W
+            Ut = np.empty((mu_, nf)).T
+            y = np.zeros(nf)
+            for r in range(mu_):
+                row = s1 + r
+                acc = -A[row, n]
+                for i in range(w):
+                    acc -= A[row, W[i]] * vals[i]
+                y[r] = acc
+                for i in range(nf):
+                    Ut[i, r] = A[row, F[i]]
+            kq = min(nf, mu_)
+            tau = np.empty(max(kq, 1))
+            if mu_ > 0:
+                if _geqrf(Ut, tau[:kq], work, iw) != 0:
+                    return REFUSED, x_aug, res, minnorm, nf, mu_, it
+                if not _rcond_upper(Ut, mu_, work, iwork, iw, ch) >= rcond_min:
+                    return REFUSED, x_aug, res, minnorm, nf, mu_, it
+                y1 = y[:mu_]
+                _trtrs_upper(Ut, mu_, _T, y1, iw, ch)  # R^T y_1 = d
+            if not minnorm:
+                k2 = nf - mu_
+                # B = L_F (m_L x nf, Fortran) and c = b_L - L_W x_W
+                B = np.empty((nf, ml)).T
+                c = np.empty((1, ml)).T
+                for r in range(ml):
+                    row = split + r
+                    acc = -A[row, n]
+                    for i in range(w):
+                        acc -= A[row, W[i]] * vals[i]
+                    c[r, 0] = acc
+                    for i in range(nf):
+                        B[r, i] = A[row, F[i]]
+                if mu_ > 0:
+                    _ormqr(_R, _N, Ut, kq, tau[:kq], B, work, iw, ch)  # B <- L_F Q
+                for r in range(ml):
+                    acc = c[r, 0]
+                    for i in range(mu_):
+                        acc -= B[r, i] * y[i]
+                    c[r, 0] = acc
+                if k2 > 0:
+                    B2 = np.asfortranarray(B[:, mu_:])
+                    tau2 = np.empty(k2)
+                    if _geqrf(B2, tau2, work, iw) != 0:
+                        return REFUSED, x_aug, res, minnorm, nf, mu_, it
+                    rc = _rcond_upper(B2, k2, work, iwork, iw, ch)
+                    if not rc * rc >= rcond_min:
+                        return REFUSED, x_aug, res, minnorm, nf, mu_, it
+                    _ormqr(_L, _T, B2, k2, tau2, c, work, iw, ch)  # c <- Q_2'^T c
+                    y2 = np.ascontiguousarray(c[:k2, 0])
+                    _trtrs_upper(B2, k2, _N, y2, iw, ch)
+                    y[mu_:] = y2
+            # x_F = Q y
+            z = np.empty((1, nf)).T
+            z[:, 0] = y
+            if mu_ > 0:
+                _ormqr(_L, _N, Ut, kq, tau[:kq], z, work, iw, ch)
+            for i in range(w):
+                x_aug[W[i]] = vals[i]
+            for i in range(nf):
+                x_aug[F[i]] = z[i, 0]
+            # gradient of the last objective, then the multipliers
+            g = np.zeros(n)
+            if minnorm:
+                g[:] = x_aug[:n]
+            else:
+                for row in range(split, m):
+                    e = 0.0
+                    for j in range(n + 1):
+                        e += A[row, j] * x_aug[j]
+                    for j in range(n):
+                        g[j] += e * A[row, j]
+            muU = np.zeros(max(mu_, 1))
+            if mu_ > 0:
+                h = np.empty((1, nf)).T
+                for i in range(nf):
+                    h[i, 0] = g[F[i]]
+                _ormqr(_L, _T, Ut, kq, tau[:kq], h, work, iw, ch)
+                muU = np.ascontiguousarray(h[:mu_, 0])
+                _trtrs_upper(Ut, mu_, _N, muU, iw, ch)
+                for r in range(mu_):
+                    muU[r] = -muU[r]
+            release = -1
+            if w > 0:
+                muW = np.empty(w)
+                big = 0.0
+                for i in range(w):
+                    acc = g[W[i]]
+                    for r in range(mu_):
+                        acc += A[s1 + r, W[i]] * muU[r]
+                    muW[i] = -acc
+                    big = max(big, abs(acc))
+                tol = dual_tol * (1.0 + big)
+                worst = np.inf
+                for i in range(w):
+                    if s[i] == 0.0:
+                        continue
+                    rate = -s[i] * muW[i]
+                    if not abs(rate) > tol:  # a bound not pushed against (or NaN)
+                        return UNDECIDED, x_aug, res, minnorm, nf, mu_, it
+                    if rate < -tol and rate < worst:
+                        worst = rate
+                        release = i
+            # the primal check first: a free variable out of its box joins the bounds
+            crossed = False
+            for j in range(n):
+                if x_aug[j] < blo[j] - eps:
+                    at_lo[j] = True
+                    crossed = True
+                elif x_aug[j] > bhi[j] + eps:
+                    at_hi[j] = True
+                    crossed = True
+            if crossed:
+                continue
+            if release >= 0:
+                at_lo[W[release]] = False
+                at_hi[W[release]] = False
+                continue
+            res = _residuals(A, x_aug, starts, rlo, rup, True)
+            return OK, x_aug, res, minnorm, nf, mu_, it
+        return NOT_CONVERGED, x_aug, res, False, 0, 0, max_iter
+
+    box_kkt = _compiled = _box_kkt
+
+
+def warm_up() -> None:
+    """Compile (or load) :func:`box_kkt` for the solver's argument types; then forbid
+    further compilation (see :func:`._eqkernel.warm_up`)."""
+    if _compiled is None or _warm:
+        return
+    n = 3
+    A = np.hstack([np.vstack([np.eye(n), np.eye(n)]), -np.ones((2 * n, 1))])
+    starts = np.array([0, n, 2 * n], dtype=np.int64)
+    z = np.zeros(2 * n)
+    _compiled(
+        A, n, n, starts, z, z, -np.ones(n), np.ones(n), np.zeros(n, dtype=np.bool_),
+        np.zeros(n, dtype=np.bool_), 1e-9, 1e-9, 1e-10, 4,
+    )  # fmt: skip
+    _compiled.disable_compile()
+    _warm.append(True)

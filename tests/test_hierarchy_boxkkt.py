@@ -1,0 +1,276 @@
+"""The box path as one compiled call (sotpy.solvers._boxkkt): a box first, equality
+levels below whose upper levels are met exactly. Every answer is compared with the
+independent reference cascade and with the NumPy path (``jit=False``); the statuses
+are counted to check which path answered, and what it refuses goes to the NumPy path
+with the same answer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reference_hierarchy import cascade_hierarchy, level_residuals
+from sotpy.solvers import HierarchySolver, _boxkkt
+
+pytestmark = pytest.mark.skipif(_boxkkt.box_kkt is None, reason="numba missing or SOTPY_JIT=0")
+
+QP_TOL = 1e-6
+
+
+@pytest.fixture
+def statuses(monkeypatch):
+    """Count the compiled box path's statuses (OK, REFUSED, UNDECIDED, NOT_CONVERGED)."""
+    counts = {s: 0 for s in range(4)}
+    real = _boxkkt.box_kkt
+
+    def spy(*args):
+        out = real(*args)
+        counts[int(out[0])] += 1
+        return out
+
+    monkeypatch.setattr(_boxkkt, "box_kkt", spy)
+    return counts
+
+
+def reach_like(rng, n, last_rows):
+    """A box on every variable, full-rank upper levels (feet-, hand-like) met by a
+    point well inside the box, a last level of ``last_rows`` rows whose target pulls
+    some variables onto their bounds."""
+    half = rng.uniform(0.2, 0.8, n)
+    box = (np.eye(n), -half, half)
+    inside = rng.uniform(-0.3, 0.3, n) * half
+    levels = [box]
+    for m in (4, 2):
+        A = rng.standard_normal((m, n))
+        b = A @ inside
+        levels.append((A, b, b))
+    A = rng.standard_normal((last_rows, n))
+    b = rng.standard_normal(last_rows)
+    levels.append((A, b, b))
+    return levels
+
+
+def assert_same(levels, res, x_ref, optimal):
+    scale = 1.0 + float(np.abs(x_ref).max())
+    np.testing.assert_allclose(res.residuals, optimal, atol=QP_TOL * scale)
+    np.testing.assert_allclose(res.x, x_ref, atol=10 * QP_TOL * scale)
+    # the kernel's residuals are those of its point
+    np.testing.assert_allclose(res.residuals, level_residuals(levels, res.x), atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("last", ["least-squares", "min-norm"])
+def test_compiled_box_path_gives_the_cascade_answer(seed, last, statuses):
+    rng = np.random.default_rng(4100 + seed)
+    n = int(rng.integers(8, 20))
+    # least squares: more rows than the directions the upper levels leave; min-norm:
+    # every level fits (the minimum-norm rule decides what is left)
+    rows = n + 3 if last == "least-squares" else max(1, n - 10)
+    levels = reach_like(rng, n, rows)
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    numpy_path = HierarchySolver(jit=False)
+    for _ in range(2):  # the first call from an empty guess, the second from its own
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+        other = numpy_path.solve(levels)
+    # the second call is proved by the kernel, as the NumPy path proves it
+    assert statuses[_boxkkt.OK] >= 1 and res.method in ("active-set", "shortcut"), statuses
+    np.testing.assert_allclose(res.x, other.x, atol=1e-9 * (1 + np.abs(other.x).max()))
+    np.testing.assert_array_equal(res.ranks, other.ranks)
+    assert res.method == other.method
+
+
+def test_min_norm_and_least_squares_ranks():
+    """Ranks as the level-by-level path reports them: each upper level its rows; a
+    least-squares last level the directions left after the upper levels and the fixed
+    variables; in min-norm mode every level its rows."""
+    rng = np.random.default_rng(7)
+    n = 12
+    for rows in (n + 3, 2):
+        levels = reach_like(rng, n, rows)
+        res = HierarchySolver().solve(levels)
+        held = int(np.sum(np.isclose(np.abs(res.x), levels[0][2], rtol=0, atol=1e-12)))
+        expected = [0, 4, 2, n - 6 - held if rows > n else rows]
+        np.testing.assert_array_equal(res.ranks, expected)
+
+
+@pytest.mark.parametrize("wrong", ["dropped", "added"])
+def test_wrong_guesses_are_corrected_in_the_kernel(wrong, statuses):
+    """The right active set with one of its bounds dropped (the point crosses it: added
+    back) or with a wrong one added (its multiplier has the wrong sign: released). Every
+    answer is the cascade's; the kernel corrects most guesses itself (a correction can
+    move other variables across their bounds, which takes more of its few iterations:
+    then the NumPy path goes on from its guess)."""
+    proved = 0
+    for seed in range(8):
+        rng = np.random.default_rng(4200 + seed)
+        n = 14
+        levels = reach_like(rng, n, n + 2)
+        A0, lo, hi = levels[0]
+        levels[0] = (A0, 0.5 * lo, 0.5 * hi)  # narrower: several bounds active
+        x_ref, optimal = cascade_hierarchy(levels)
+        solver = HierarchySolver()
+        for _ in range(2):
+            solver.solve(levels)
+        box = solver._structure.box
+        held = np.flatnonzero(box.at_lo | box.at_hi)
+        assert 1 <= len(held) < n - 6
+        ok = statuses[_boxkkt.OK]
+        if wrong == "dropped":
+            j = rng.choice(held)
+            box.at_lo[j] = box.at_hi[j] = False
+        else:
+            # the free variable nearest to a bound held at it (as a bound that the
+            # previous tick held and this one leaves)
+            x = x_ref / (0.5 * hi)
+            x[held] = 0.0
+            j = int(np.argmax(np.abs(x)))
+            (box.at_hi if x[j] > 0 else box.at_lo)[j] = True
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+        proved += statuses[_boxkkt.OK] == ok + 1
+    assert proved >= 6, proved
+
+
+def test_a_wrong_bound_is_released_by_the_sign_of_its_multiplier(statuses):
+    """x_0 held at its upper bound although the last level pulls it inside: released in
+    the kernel (no fallback), the answer is the cascade's."""
+    n = 4
+    box = (np.eye(n), -np.ones(n), np.ones(n))
+    target = np.array([0.5, -0.2, 0.3, 0.1])
+    levels = [box, (np.ones((1, n)), np.array([0.7]), np.array([0.7])), (np.eye(n), target, target)]
+    x_ref, _ = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    solver.solve(levels)
+    solver._structure.box.at_hi[0] = True
+    res = solver.solve(levels)
+    np.testing.assert_allclose(res.x, x_ref, atol=1e-9)
+    assert not solver._structure.box.at_hi[0]
+    assert statuses[_boxkkt.OK] == 2
+
+
+def test_a_crossed_bound_is_added_in_the_kernel(statuses):
+    """From an empty guess the unconstrained point leaves the box: the variables it
+    crosses are fixed at their bounds, and the answer is the cascade's."""
+    n = 4
+    box = (np.eye(n), -np.full(n, 0.2), np.full(n, 0.2))
+    target = np.array([0.9, -0.1, -0.8, 0.05])
+    levels = [box, (np.eye(n), target, target)]
+    x_ref, _ = cascade_hierarchy(levels)
+    res = HierarchySolver().solve(levels)
+    np.testing.assert_allclose(res.x, x_ref, atol=1e-9)
+    np.testing.assert_allclose(res.x, np.clip(target, -0.2, 0.2), atol=1e-12)
+    assert res.method == "active-set"
+    assert statuses[_boxkkt.OK] == 1
+
+
+def test_rank_deficient_upper_level_is_refused_and_waits(statuses):
+    """Two parallel rows in an upper level: the QR of the upper rows is singular, the
+    kernel refuses, the level-by-level path answers (the cascade's answer) and the
+    kernel is not tried again for a while."""
+    rng = np.random.default_rng(11)
+    n = 10
+    levels = reach_like(rng, n, n + 2)
+    A, b, _ = levels[1]
+    A = np.vstack([A, 2.0 * A[0]])
+    b = np.append(b, 2.0 * b[0])
+    levels[1] = (A, b, b)
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    for _ in range(5):
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+    assert statuses[_boxkkt.REFUSED] == 1 and statuses[_boxkkt.OK] == 0
+    assert solver._structure.kkt_wait > 0
+
+
+def test_last_level_blind_to_some_directions_is_refused(statuses):
+    """A posture without the free flyer's columns: the last level leaves directions
+    free (the minimum-norm rule must decide them), the kernel refuses."""
+    rng = np.random.default_rng(12)
+    n = 12
+    posture = np.zeros((n - 6, n))
+    posture[:, 6:] = np.eye(n - 6)
+    target = rng.standard_normal(n - 6)
+    levels = [(np.eye(n), -np.ones(n), np.ones(n)), (posture, target, target)]
+    x_ref, optimal = cascade_hierarchy(levels)
+    res = HierarchySolver().solve(levels)
+    assert_same(levels, res, x_ref, optimal)
+    assert statuses[_boxkkt.REFUSED] == 1 and statuses[_boxkkt.OK] == 0
+
+
+def test_bound_not_pushed_against_is_left_to_the_level_by_level_path(statuses):
+    """The last level's optimum sits exactly on a bound: held there, its multiplier is
+    zero; the kernel does not decide it (UNDECIDED) and the NumPy path does."""
+    n = 3
+    box = (np.eye(n), -np.ones(n), np.ones(n))
+    target = np.array([1.0, 0.2, -0.3])  # x_0 wants exactly its upper bound
+    levels = [box, (np.eye(n), target, target)]
+    solver = HierarchySolver()
+    solver.solve(levels)
+    solver._structure.box.at_hi[0] = True
+    res = solver.solve(levels)
+    np.testing.assert_allclose(res.x, target, atol=1e-12)
+    assert statuses[_boxkkt.UNDECIDED] == 1
+
+
+def test_fixed_variables_and_empty_levels(statuses):
+    """Bounds that coincide (a variable fixed, never released) and an empty level
+    between the upper ones and the last one."""
+    rng = np.random.default_rng(13)
+    n = 10
+    levels = reach_like(rng, n, n + 1)
+    lo, hi = levels[0][1].copy(), levels[0][2].copy()
+    lo[3] = hi[3] = 0.05
+    levels[0] = (levels[0][0], lo, hi)
+    levels.insert(2, (np.zeros((0, n)), np.zeros(0), np.zeros(0)))
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    for _ in range(2):
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+    assert res.x[3] == 0.05
+    assert statuses[_boxkkt.OK] == 2
+
+
+def test_drifting_stack_stays_on_the_compiled_path(statuses):
+    """A stack that drifts tick by tick (the upper levels' point moving inside the box,
+    the last target sweeping, bounds entering and leaving the active set): every answer
+    is the cascade's and the compiled path gives almost all of them."""
+    rng = np.random.default_rng(14)
+    n = 12
+    half = rng.uniform(0.3, 0.8, n)
+    box = (np.eye(n), -half, half)
+    upper = [rng.standard_normal((4, n)), rng.standard_normal((2, n))]
+    last = rng.standard_normal((n + 2, n))
+    target = rng.standard_normal(n + 2)
+    solver = HierarchySolver()
+    active = set()
+    for t in range(30):
+        inside = 0.3 * half * np.sin(0.1 * t + np.arange(n))
+        stack = [box] + [(A, A @ inside, A @ inside) for A in upper]
+        b = (1.0 + 0.05 * t) * target
+        stack.append((last, b, b))
+        x_ref, optimal = cascade_hierarchy(stack)
+        res = solver.solve(stack)
+        assert_same(stack, res, x_ref, optimal)
+        active.add(int(np.sum(np.isclose(np.abs(res.x), half, rtol=0, atol=1e-12))))
+    assert len(active) >= 3, active  # the active set changed along the way
+    assert statuses[_boxkkt.OK] >= 28, statuses
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_numpy_path_keeps_priorities_when_a_merged_block_exceeds_the_free_directions(seed):
+    """Regression (found by comparing the two paths): the NumPy box path factors the
+    levels found of full rank at the previous call as one block; when the guess fixes
+    more variables and the block, which includes the last level, has more rows than free
+    directions, the block must be split, not solved as one least-squares fit (which
+    traded the upper levels against the last one)."""
+    rng = np.random.default_rng(4100 + seed)
+    n = int(rng.integers(8, 20))
+    levels = reach_like(rng, n, max(1, n - 10))
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver(jit=False)
+    for _ in range(3):
+        assert_same(levels, solver.solve(levels), x_ref, optimal)
