@@ -60,7 +60,9 @@ Solution paths
   corrected a few times if needed; no QP. Inequality rows of the levels below guessed
   at a bound are held there too (one KKT solve, their multipliers verified, when the
   levels above the last can be met exactly; else level by level, a held row judged by
-  its own level's residual or, when met, by the levels below);
+  its own level's residual or, when met, by the levels below). With only equality rows
+  below the box (the SOT's usual tick) the whole iteration is one compiled call
+  (:mod:`._boxkkt`) when it can prove its answer;
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
