@@ -107,7 +107,26 @@ if ENABLED:  # pragma: no branch - the environment decides
         dual_tol,
         max_iter,
     ):  # pragma: no cover - compiled
-        """See :func:`box_kkt`."""
+        """The box path's iteration (see the module doc), ``box_kkt`` when compiled.
+
+        Args:
+            A: the stacked augmented rows ``[A | -ref]`` (``m x (n + 1)``, C order):
+                the box rows ``[0, s1)``, then equality rows (``-ref = -b``).
+            s1: first row below the box; ``split``: first row of the last level.
+            starts: level starts (int64), for the residuals; ``rlo``, ``rup``: the
+                bounds relative to ``ref`` (the box rows' violation).
+            blo, bhi: the box on the variables; ``at_lo``, ``at_hi``: the guess,
+                corrected in place.
+            eps: primal tolerance; ``rcond_min``: see the module doc; ``dual_tol``:
+                relative zero of a multiplier; ``max_iter``: corrections allowed.
+
+        Returns:
+            ``(status, x_aug, residuals, minnorm, nf, m_upper, iterations)``: the
+            status (:data:`OK`, :data:`REFUSED`, :data:`UNDECIDED`,
+            :data:`NOT_CONVERGED`), the point ``[x; 1]``, each level's residual (with
+            ``OK``), whether every level was met (minimum norm), the free variables and
+            upper rows of the last solve, and the correction at which it stopped.
+        """
         m = A.shape[0]
         n = A.shape[1] - 1
         x_aug = np.ones(n + 1)
