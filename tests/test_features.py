@@ -222,10 +222,11 @@ def test_feature_pose_errordot_is_the_rate_due_to_the_moving_reference(talos, cl
         np.testing.assert_allclose(J @ v + ed, (ep - em) / (2 * EPS), atol=1e-6)
 
 
-def test_feature_pose_selection_keeps_the_selected_rows(talos):
+@pytest.mark.parametrize("cls", [FeaturePose, FeaturePoseSE3])
+def test_feature_pose_selection_keeps_the_selected_rows(talos, cls):
     model, dyn = talos
     rng = np.random.default_rng(3)
-    f = FeaturePose("f")
+    f = cls("f")
     plug(dyn.signal("right-wrist"), f.position)
     plug(dyn.signal("Jright-wrist"), f.Jq)
     dyn.position.value = random_q(model, rng)
@@ -238,14 +239,23 @@ def test_feature_pose_selection_keeps_the_selected_rows(talos):
         ("000111", [3, 4, 5]),
         ("001", [2]),
         ("010001", [1, 5]),
+        ("111001", [0, 1, 2, 5]),
+        ("000011", [4, 5]),
+        ("111111", [0, 1, 2, 3, 4, 5]),
     ):
         f.selec.value = flags
         np.testing.assert_array_equal(f.error.value, e[rows])
         np.testing.assert_allclose(f.jacobian.value, J[rows], rtol=0, atol=1e-14)
         np.testing.assert_allclose(f.errordot.value, ed[rows], atol=1e-15)
         assert f.dim.value == len(rows)
+    # the error is a fresh array: writing into it changes nothing the feature computes
+    f.selec.value = "111000"
+    f.error.value[:] = np.nan
+    np.testing.assert_allclose(f.errordot.value, ed[:3], atol=1e-15)
+    f.reference.value = f.reference.value.copy()  # new tick's values, same placements
+    np.testing.assert_array_equal(f.error.value, e[:3])
     f.selec.value = "1111111"  # 7 rows asked of a 6-row feature
-    with pytest.raises(SignalTypeError, match=r"FeaturePose\(f\)::input\(flag\)::selec"):
+    with pytest.raises(SignalTypeError, match=rf"{cls.__name__}\(f\)::input\(flag\)::selec"):
         f.error.value  # noqa: B018
 
 

@@ -174,7 +174,10 @@ class HierarchyResult:
     @property
     def feasible(self) -> bool:
         """Whether the first (hard) level is satisfied."""
-        return bool(self.satisfied[0]) if len(self.residuals) else True
+        if not len(self.residuals):
+            return True
+        # satisfied[0] in scalars (the SOT asks at every tick)
+        return bool(self.residuals[0] <= 10.0 * self._eps * (1.0 + self._fro[0] * self.xnorm))
 
     @property
     def all_satisfied(self) -> bool:
@@ -363,6 +366,7 @@ class HierarchySolver:
         validate; classify rows."""
         n = self.n
         parsed = []
+        sizes_l = []
         general = False
         try:
             for k, level in enumerate(levels):
@@ -399,11 +403,12 @@ class HierarchySolver:
                 ):
                     up = _as_vector(up, k, "upper", m)
                 parsed.append((A, lo, up))
+                sizes_l.append(m)
         except TypeError as exc:
             raise SolverError(f"solve_hierarchy: levels must be a list of tuples ({exc})") from None
         if n is None:
             raise SolverError("solve_hierarchy: no level and no number of variables")
-        sizes = tuple(a.shape[0] for a, _, _ in parsed)
+        sizes = tuple(sizes_l)
         st = self._structure
         if st is None or st.sizes != sizes or st.A.shape[1] != n + 1:
             st = self._new_structure(sizes, n)

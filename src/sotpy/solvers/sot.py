@@ -289,7 +289,9 @@ class SOT(Entity):
             lams.append(overrides.get(task.name, damping) if overrides else damping)
         if not levels:
             return np.zeros(nv)
-        result = self._solver.solve(levels, damping=lams)
+        # one number when every level has the same damping (the usual undamped stack):
+        # the solver then skips its per-level parsing
+        result = self._solver.solve(levels, damping=lams if any(lams) else 0.0)
         self.lastResult = result
         hard = self._jointLimits or self._stack[0].isInequality
         if hard and not result.feasible:

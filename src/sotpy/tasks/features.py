@@ -67,6 +67,7 @@ __all__ = [
 
 _EMPTY = np.zeros(0)
 _MISSING = object()
+_NONE = np.zeros(0, dtype=np.intp)  # FeaturePose._split: no row of a block selected
 
 
 # -- flags ----------------------------------------------------------------------------
@@ -524,8 +525,8 @@ class FeaturePose(FeatureAbstract):
     _usesRotation = True
 
     def __init__(self, name: str) -> None:
-        self._D = np.zeros((6, 6))  # buffer of _poseDerivative (off-diagonal blocks: 0)
         self._rel: tuple[Any, ...] = (None, None, None, None)
+        self._splitCache: tuple[Any, ...] = (_MISSING, None, None)
         super().__init__(name)
 
     def _relative(self, M: pin.SE3, Mdes: pin.SE3) -> tuple[pin.SE3, np.ndarray | None]:
@@ -540,16 +541,50 @@ class FeaturePose(FeatureAbstract):
         return rel, R
 
     # the two variants differ only in these three functions of Mr (and R = its rotation)
-    def _poseError(self, rel: pin.SE3, R: np.ndarray) -> np.ndarray:
-        return np.concatenate((rel.translation, pin.log3(R)))
+    def _poseError(self, rel: pin.SE3, R: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+        """The selected rows of the error."""
+        t, r = self._split(rows)
+        if t is None and r is _NONE:  # "111000": the position alone, no log3
+            return rel.translation.copy()  # (a view into rel otherwise)
+        e = np.empty(6)
+        e[:3] = rel.translation
+        e[3:] = pin.log3(R)
+        return e if rows is None else e[rows]
 
-    def _poseDerivative(self, rel: pin.SE3, R: np.ndarray) -> np.ndarray:
-        """D (6 x 6) with de/dt = D nu for a body velocity nu of the frame (may be a
-        buffer reused at the next call)."""
-        D = self._D
-        D[:3, :3] = R
-        D[3:, 3:] = pin.Jlog3(R)
-        return D
+    def _poseJacobian(
+        self, rel: pin.SE3, R: np.ndarray, rows: np.ndarray | None, Jq: np.ndarray
+    ) -> np.ndarray:
+        """The selected rows of ``diag(R, Jlog3(R)) Jq``, by blocks (only the selected
+        ones computed)."""
+        t, r = self._split(rows)
+        lin = None
+        if t is not _NONE:
+            lin = R @ Jq[:3] if t is None else R[t] @ Jq[:3]
+        if r is _NONE:
+            return lin
+        ang = pin.Jlog3(R)
+        ang = ang @ Jq[3:] if r is None else ang[r] @ Jq[3:]
+        if lin is None:
+            return ang
+        J = np.empty((lin.shape[0] + ang.shape[0], Jq.shape[1]))
+        J[: lin.shape[0]] = lin
+        J[lin.shape[0] :] = ang
+        return J
+
+    def _split(self, rows: np.ndarray | None) -> tuple[Any, Any]:
+        """The selected rows by block, (translation, rotation): ``None`` for the whole
+        block, ``_NONE`` for none of it, else the indices within the block."""
+        c = self._splitCache
+        if c[0] is rows:
+            return c[1], c[2]
+        if rows is None:
+            t = r = None
+        else:
+            t, r = rows[rows < 3], rows[rows >= 3] - 3
+            t = None if len(t) == 3 else (_NONE if len(t) == 0 else t)
+            r = None if len(r) == 3 else (_NONE if len(r) == 0 else r)
+        self._splitCache = (rows, t, r)
+        return t, r
 
     def _poseErrordot(self, rel: pin.SE3, R: np.ndarray, nu: np.ndarray) -> np.ndarray:
         v, w = nu[:3], nu[3:]
@@ -559,16 +594,15 @@ class FeaturePose(FeatureAbstract):
         return out
 
     def _error(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3) -> np.ndarray:
-        rows = self._rows(selec, 6)
-        e = self._poseError(*self._relative(M, Mdes))
-        return e if rows is None else e[rows]
+        rel, R = self._relative(M, Mdes)
+        return self._poseError(rel, R, self._rows(selec, 6))
 
     def _jacobian(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3, Jq: np.ndarray) -> np.ndarray:
         rows = self._rows(selec, 6)
         if Jq.shape[0] != 6:
             raise self._sizeError(self.Jq, Jq, "a 6 x nv Jacobian (LOCAL, linear rows first)")
-        D = self._poseDerivative(*self._relative(M, Mdes))
-        return (D if rows is None else D[rows]) @ Jq
+        rel, R = self._relative(M, Mdes)
+        return self._poseJacobian(rel, R, rows, Jq)
 
     def _errordot(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3, nu: np.ndarray) -> np.ndarray:
         rows = self._rows(selec, 6)
@@ -606,11 +640,13 @@ class FeaturePoseSE3(FeaturePose):
 
     _usesRotation = False
 
-    def _poseError(self, rel: pin.SE3, R: None) -> np.ndarray:
-        return pin.log6(rel).vector
+    def _poseError(self, rel: pin.SE3, R: None, rows: np.ndarray | None) -> np.ndarray:
+        return _take(pin.log6(rel).vector, rows)
 
-    def _poseDerivative(self, rel: pin.SE3, R: None) -> np.ndarray:
-        return pin.Jlog6(rel)
+    def _poseJacobian(
+        self, rel: pin.SE3, R: None, rows: np.ndarray | None, Jq: np.ndarray
+    ) -> np.ndarray:
+        return _take(pin.Jlog6(rel), rows) @ Jq
 
     def _poseErrordot(self, rel: pin.SE3, R: None, nu: np.ndarray) -> np.ndarray:
         return -pin.Jlog6(rel) @ rel.actInv(pin.Motion(nu)).vector
@@ -712,13 +748,13 @@ class FeaturePosture(FeatureAbstract):
         return _take(e, self._rows(selec, self.model.nv))
 
     def _jacobian(self, selec: Flags, q: np.ndarray, qdes: np.ndarray) -> np.ndarray:
+        cached = self._jcache  # only ever set for one-DoF joints (constant rows)
+        if cached is not None and cached[0] is selec:
+            return cached[1]
         nv = self.model.nv
         rows = self._rows(selec, nv)
         idx = np.arange(nv) if rows is None else rows
         if self._simple[idx].all():
-            cached = self._jcache
-            if cached is not None and cached[0] is selec:
-                return cached[1]
             J = np.zeros((len(idx), nv))
             J[np.arange(len(idx)), idx] = 1.0
             J.flags.writeable = False
