@@ -274,3 +274,89 @@ def test_numpy_path_keeps_priorities_when_a_merged_block_exceeds_the_free_direct
     solver = HierarchySolver(jit=False)
     for _ in range(3):
         assert_same(levels, solver.solve(levels), x_ref, optimal)
+
+
+def rank_deficient_below_box(rng, n, scale):
+    """A box on every variable of half-width ``scale``; below it a level with a
+    repeated row (rank deficient: the compiled box call refuses it), a conflicting
+    level, and a least-squares last level; the targets small enough for the optimum to
+    lie inside a wide box."""
+    A1 = rng.standard_normal((4, n))
+    A1[3] = A1[1]
+    b1 = 0.1 * rng.standard_normal(4)
+    A2 = rng.standard_normal((3, n))
+    A2[2] = A2[0]
+    b2 = 0.1 * rng.standard_normal(3)
+    b2[2] = b2[0] + 0.05  # the same row, two targets: in conflict
+    A3 = rng.standard_normal((n + 2, n))
+    b3 = 0.1 * rng.standard_normal(n + 2)
+    return [
+        (np.eye(n), -scale * np.ones(n), scale * np.ones(n)),
+        (A1, b1, b1),
+        (A2, b2, b2),
+        (A3, b3, b3),
+    ]
+
+
+@pytest.fixture
+def free_calls(monkeypatch):
+    """Count the answers of the compiled equality recursion with no bound fixed."""
+    calls = {"answered": 0}
+    real = HierarchySolver._box_free_compiled
+
+    def spy(self, st, stepper):
+        out = real(self, st, stepper)
+        calls["answered"] += out is not None
+        return out
+
+    monkeypatch.setattr(HierarchySolver, "_box_free_compiled", spy)
+    return calls
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_rank_deficient_levels_inside_the_box_take_the_compiled_recursion(
+    seed, statuses, free_calls
+):
+    """Rank-deficient levels below a box that no bound of the optimum touches: the
+    compiled box call refuses the shape, the compiled equality recursion answers, and
+    the answer is the reference cascade's and the NumPy path's (ranks included)."""
+    rng = np.random.default_rng(4700 + seed)
+    n = int(rng.integers(8, 16))
+    levels = rank_deficient_below_box(rng, n, 100.0)
+    x_ref, optimal = cascade_hierarchy(levels)
+    assert np.abs(x_ref).max() < 100.0  # the box is not active
+    solver = HierarchySolver()
+    for _ in range(3):
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+    assert statuses[_boxkkt.REFUSED] >= 1 and statuses[_boxkkt.OK] == 0, statuses
+    assert free_calls["answered"] == 3
+    other = HierarchySolver(jit=False).solve(levels)
+    np.testing.assert_allclose(res.x, other.x, atol=1e-9 * (1 + np.abs(other.x).max()))
+    np.testing.assert_array_equal(res.ranks, other.ranks)
+    assert res.method == other.method == "shortcut"
+    assert res.ranks[1] == 3 and res.ranks[2] == 2  # the repeated rows counted once
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_point_outside_the_box_goes_on_with_its_bounds_fixed(seed, free_calls):
+    """The same shape with a box the unconstrained point leaves: the compiled recursion
+    answers the first try, the crossing variables are fixed, and the NumPy path ends at
+    the cascade's answer. Back in a wide box, the recursion answers again once the
+    bounds are released."""
+    rng = np.random.default_rng(4800 + seed)
+    n = int(rng.integers(8, 16))
+    wide = rank_deficient_below_box(rng, n, 100.0)
+    x_wide, opt_wide = cascade_hierarchy(wide)
+    h = 0.8 * np.abs(x_wide).max()
+    tight = [(wide[0][0], -h * np.ones(n), h * np.ones(n)), *wide[1:]]
+    x_tight, opt_tight = cascade_hierarchy(tight)
+    solver = HierarchySolver()
+    res = solver.solve(tight)
+    assert free_calls["answered"] == 1  # the first try, then the crossing bounds fixed
+    assert_same(tight, res, x_tight, opt_tight)
+    assert res.method != "shortcut"
+    for _ in range(2):
+        res = solver.solve(wide)
+        assert_same(wide, res, x_wide, opt_wide)
+    assert res.method == "shortcut" and free_calls["answered"] >= 2

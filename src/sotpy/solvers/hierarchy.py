@@ -859,6 +859,8 @@ class HierarchySolver:
                     if verdict is None:
                         return None
                 ranks, release = verdict
+            elif not len(W) and (ranks := self._box_free_compiled(st, stepper)) is not None:
+                release = -1  # no bound fixed: nothing to release
             else:
                 # a refusal on a corrected guess says little about the next calls
                 verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
@@ -1082,6 +1084,21 @@ class HierarchySolver:
         side.fill(0)
         side[v <= st.loin[i_lower:] + tol] = -1
         side[v >= st.upin[i_lower:] - tol] = 1
+
+    def _box_free_compiled(self, st: _Structure, stepper: NullspaceStepper) -> np.ndarray | None:
+        """No bound guessed active and only equality rows below the box: the levels below
+        by the compiled equality recursion (any rank), the box left to the caller's
+        primal check. If the point is within the box it is the answer: the box level
+        is then met exactly, and the point is the lexicographic minimum-norm optimum of
+        the levels below over every x, a fortiori over the box. None when it does not
+        apply (jit off, level 0 has equality rows, nothing below it)."""
+        eb = st.eq_bounds
+        if not self.jit or eb[0][1] > eb[0][0] or st.last < 1:
+            return None
+        blocks = [(k, k + 1) for k, b in enumerate(eb) if b[1] > b[0]]
+        starts = np.array([b[0] for b in eb] + [len(st.Aeq)], dtype=np.int64)
+        stepper.reset()  # (an earlier correction may have fixed variables)
+        return self._compiled_steps(st.Aeq, starts, blocks, [0.0] * len(eb), st.last, stepper)
 
     def _box_kkt(
         self,

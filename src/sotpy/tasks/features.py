@@ -525,6 +525,7 @@ class FeaturePose(FeatureAbstract):
     _usesRotation = True
 
     def __init__(self, name: str) -> None:
+        self._D = np.zeros((6, 6))  # buffer of _poseJacobian (off-diagonal blocks: 0)
         self._rel: tuple[Any, ...] = (None, None, None, None)
         self._splitCache: tuple[Any, ...] = (_MISSING, None, None)
         super().__init__(name)
@@ -546,30 +547,25 @@ class FeaturePose(FeatureAbstract):
         t, r = self._split(rows)
         if t is None and r is _NONE:  # "111000": the position alone, no log3
             return rel.translation.copy()  # (a view into rel otherwise)
-        e = np.empty(6)
-        e[:3] = rel.translation
-        e[3:] = pin.log3(R)
+        e = np.concatenate((rel.translation, pin.log3(R)))
         return e if rows is None else e[rows]
 
     def _poseJacobian(
         self, rel: pin.SE3, R: np.ndarray, rows: np.ndarray | None, Jq: np.ndarray
     ) -> np.ndarray:
-        """The selected rows of ``diag(R, Jlog3(R)) Jq``, by blocks (only the selected
-        ones computed)."""
+        """The selected rows of ``D Jq``, ``D = diag(R, Jlog3(R))``; a position-only or
+        rotation-only selection uses its block alone (one small product costs about as
+        much as a big one here, so the full selection is one ``6 x 6`` product)."""
         t, r = self._split(rows)
-        lin = None
-        if t is not _NONE:
-            lin = R @ Jq[:3] if t is None else R[t] @ Jq[:3]
         if r is _NONE:
-            return lin
-        ang = pin.Jlog3(R)
-        ang = ang @ Jq[3:] if r is None else ang[r] @ Jq[3:]
-        if lin is None:
-            return ang
-        J = np.empty((lin.shape[0] + ang.shape[0], Jq.shape[1]))
-        J[: lin.shape[0]] = lin
-        J[lin.shape[0] :] = ang
-        return J
+            return R @ Jq[:3] if t is None else R[t] @ Jq[:3]
+        if t is _NONE:
+            Jl = pin.Jlog3(R)
+            return Jl @ Jq[3:] if r is None else Jl[r] @ Jq[3:]
+        D = self._D
+        D[:3, :3] = R
+        D[3:, 3:] = pin.Jlog3(R)
+        return D @ Jq if rows is None else D[rows] @ Jq
 
     def _split(self, rows: np.ndarray | None) -> tuple[Any, Any]:
         """The selected rows by block, (translation, rotation): ``None`` for the whole
