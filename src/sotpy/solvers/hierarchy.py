@@ -1098,7 +1098,12 @@ class HierarchySolver:
         blocks = [(k, k + 1) for k, b in enumerate(eb) if b[1] > b[0]]
         starts = np.array([b[0] for b in eb] + [len(st.Aeq)], dtype=np.int64)
         stepper.reset()  # (an earlier correction may have fixed variables)
-        return self._compiled_steps(st.Aeq, starts, blocks, [0.0] * len(eb), st.last, stepper)
+        ranks = self._compiled_steps(st.Aeq, starts, blocks, [0.0] * len(eb), st.last, stepper)
+        if ranks is not None:  # the plans of the level-by-level path, as it sets them
+            eq_sizes = [0] + [e1 - e0 for e0, e1, _, _ in eb[1:]]
+            st.box_blocks = _plan_blocks(eq_sizes, ranks)
+            st.box_full = [bool(ranks[k] == eq_sizes[k]) for k, _ in blocks]
+        return ranks
 
     def _box_kkt(
         self,
