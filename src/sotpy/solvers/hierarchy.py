@@ -210,9 +210,11 @@ class _Structure:
         "d",
         "daqp_failed",
         "din",
+        "eq_blocks",
         "eq_bounds",
         "eq_full",
         "eq_idx",
+        "eq_starts",
         "eqmask",
         "hi_adj",
         "in_idx",
@@ -538,6 +540,9 @@ class HierarchySolver:
             e += ne
             i += ni
         st.eq_bounds = bounds
+        # the equality stack's levels for the compiled recursion: starts, one block each
+        st.eq_starts = np.array([b[0] for b in bounds] + [e], dtype=np.int64)
+        st.eq_blocks = [(k, k + 1) for k, b in enumerate(bounds) if b[1] > b[0]]
         st.in_level = np.repeat(
             np.arange(len(bounds), dtype=np.intp), [i1 - i0 for _, _, i0, i1 in bounds]
         )
@@ -736,9 +741,7 @@ class HierarchySolver:
             last = max((k for k, b in enumerate(st.eq_bounds) if b[1] > b[0]), default=-1)
             done = None
             if self.jit and len(Aeq):
-                eq_starts = np.array([b[0] for b in st.eq_bounds] + [len(Aeq)], dtype=np.int64)
-                blocks = [(k, k + 1) for k, b in enumerate(st.eq_bounds) if b[1] > b[0]]
-                done = self._compiled_steps(Aeq, eq_starts, blocks, lams, last, stepper)
+                done = self._compiled_steps(Aeq, st.eq_starts, st.eq_blocks, lams, last, stepper)
             if done is not None:
                 ranks[:] = done
             else:
@@ -1095,14 +1098,12 @@ class HierarchySolver:
         eb = st.eq_bounds
         if not self.jit or eb[0][1] > eb[0][0] or st.last < 1:
             return None
-        blocks = [(k, k + 1) for k, b in enumerate(eb) if b[1] > b[0]]
-        starts = np.array([b[0] for b in eb] + [len(st.Aeq)], dtype=np.int64)
         stepper.reset()  # (an earlier correction may have fixed variables)
-        ranks = self._compiled_steps(st.Aeq, starts, blocks, [0.0] * len(eb), st.last, stepper)
-        if ranks is not None:  # the plans of the level-by-level path, as it sets them
-            eq_sizes = [0] + [e1 - e0 for e0, e1, _, _ in eb[1:]]
-            st.box_blocks = _plan_blocks(eq_sizes, ranks)
-            st.box_full = [bool(ranks[k] == eq_sizes[k]) for k, _ in blocks]
+        ranks = self._compiled_steps(
+            st.Aeq, st.eq_starts, st.eq_blocks, [0.0] * len(eb), st.last, stepper
+        )
+        if ranks is not None:  # the level-by-level path's plans, as it sets them
+            _remember_box_plan(st, ranks, [k for k, _ in st.eq_blocks])
         return ranks
 
     def _box_kkt(
@@ -1198,7 +1199,7 @@ class HierarchySolver:
                 dual.level(rows, stepper.x_aug, stepper.w[:n, c0:n], rank, stepper.last_qr)
             return r
 
-        eq_sizes = [0] + [e1 - e0 for e0, e1, _, _ in eb[1:]]  # level 0: held by fixing
+        eq_sizes = _box_eq_sizes(eb)
         for k0, k1 in blocks:
             ks = list(range(k0, k1))
             if len(ks) > 1 and one(ks, True) >= 0:
@@ -1206,8 +1207,7 @@ class HierarchySolver:
                 continue
             for k in ks:
                 ranks[k] = one([k], False)
-        st.box_blocks = _plan_blocks(eq_sizes, ranks)
-        st.box_full = [bool(ranks[k] == eq_sizes[k]) for k in levels]
+        _remember_box_plan(st, ranks, levels)
         return ranks
 
     def _qp_level(
@@ -1485,6 +1485,21 @@ def _plan_blocks(sizes, ranks) -> list[tuple[int, int]]:
     if run >= 0:
         blocks.append((run, len(sizes)))
     return blocks
+
+
+def _box_eq_sizes(eq_bounds) -> list[int]:
+    """Equality rows per level on the box path (level 0: none, the box is held by
+    fixing variables)."""
+    return [0] + [e1 - e0 for e0, e1, _, _ in eq_bounds[1:]]
+
+
+def _remember_box_plan(st: _Structure, ranks: np.ndarray, levels: list[int]) -> None:
+    """The box path's plans for the next call from this call's ranks: the levels of full
+    row rank merged into blocks, and which of ``levels`` (the non-empty ones below the
+    box) had full row rank."""
+    eq_sizes = _box_eq_sizes(st.eq_bounds)
+    st.box_blocks = _plan_blocks(eq_sizes, ranks)
+    st.box_full = [bool(ranks[k] == eq_sizes[k]) for k in levels]
 
 
 def _widen(st: _Structure, i1: int, v: np.ndarray) -> None:
