@@ -34,7 +34,7 @@ from typing import Any
 
 from ..errors import CycleError, PlugError
 from .pool import pool
-from .signal import FUNCTION, UNSET, OutputSignal, Signal, _unplugged
+from .signal import FUNCTION, UNSET, OutputSignal, Signal, _pull, _unplugged
 
 __all__ = ["PeriodicCall", "Plan", "compilePlan"]
 
@@ -79,20 +79,22 @@ class Plan:
         Raises:
             UnpluggedError: listing every unset input the sinks depend on.
         """
-        order, live = _topological(self._sinks)
+        order, live, fused = _topological(self._sinks)
         segments: list[tuple[Callable[[list[Any], int], None], list[Any]]] = []
         for s, is_live in zip(order, live, strict=True):
-            srcs = s._srcs
+            srcs, fn = fused.get(id(s), (s._srcs, s._fn))
             if not is_live:
-                kind, item = _run_checked, s
+                # the lazy rule over the dependencies; a fused output that is not live
+                # pulls what its callback reads (the plan ordered only its sources)
+                kind, item = (_run_pulled if id(s) in fused else _run_checked), s
             elif s._withTime:
-                kind, item = _run_live_n, (s, s._fn, srcs, True)
+                kind, item = _run_live_n, (s, fn, srcs, True)
             elif len(srcs) == 2:
-                kind, item = _run_live_2, (s, s._fn, srcs[0], srcs[1])
+                kind, item = _run_live_2, (s, fn, srcs[0], srcs[1])
             elif len(srcs) == 1:
-                kind, item = _run_live_1, (s, s._fn, srcs[0])
+                kind, item = _run_live_1, (s, fn, srcs[0])
             else:
-                kind, item = _run_live_n, (s, s._fn, srcs, False)
+                kind, item = _run_live_n, (s, fn, srcs, False)
             if segments and segments[-1][0] is kind:
                 segments[-1][1].append(item)
             else:
@@ -137,6 +139,12 @@ def _run_checked(items: list[Any], t: int) -> None:
             s._update(t)
 
 
+def _run_pulled(items: list[Any], t: int) -> None:
+    for s in items:
+        if s._checked < t:
+            _pull(s, t)
+
+
 def compilePlan(sinks: Iterable[Signal]) -> Plan:
     """A compiled :class:`Plan` for ``sinks`` (compiles now, so errors show at once)."""
     plan = Plan(sinks)
@@ -144,12 +152,27 @@ def compilePlan(sinks: Iterable[Signal]) -> Plan:
     return plan
 
 
-def _topological(sinks: tuple[Signal, ...]) -> tuple[list[OutputSignal], list[bool]]:
-    """Outputs in FUNCTION mode upstream of ``sinks``, dependencies first, and whether
-    each is live. Iterative depth-first post-order; raises on unset inputs."""
+def _topological(
+    sinks: tuple[Signal, ...],
+) -> tuple[list[OutputSignal], list[bool], dict[int, tuple[tuple[Signal, ...], Any]]]:
+    """Outputs in FUNCTION mode upstream of ``sinks``, dependencies first, whether each
+    is live, and the fused evaluations in force (``id(output) -> (sources, fn)``, see
+    :meth:`OutputSignal.setPlanFusion`). Iterative depth-first post-order; raises on
+    unset inputs."""
     order: list[OutputSignal] = []
     state: dict[int, int] = {}  # 1: on the stack, 2: done
     missing: list[Signal] = []
+    fused: dict[int, tuple[tuple[Signal, ...], Any]] = {}
+
+    def sources(node: OutputSignal) -> tuple[Signal, ...]:
+        hook = node._fusion
+        if hook is not None and not node._withTime:
+            f = hook()
+            if f is not None:
+                fused[id(node)] = f
+                return f[0]
+        return node._srcs
+
     for sink in sinks:
         root = sink._holder()
         if root._mode == UNSET:
@@ -158,7 +181,7 @@ def _topological(sinks: tuple[Signal, ...]) -> tuple[list[OutputSignal], list[bo
         if root._mode != FUNCTION or id(root) in state:
             continue
         state[id(root)] = 1
-        stack = [(root, iter(root._srcs))]  # type: ignore[attr-defined]
+        stack = [(root, iter(sources(root)))]  # type: ignore[arg-type]
         while stack:
             node, it = stack[-1]
             for d in it:
@@ -173,7 +196,7 @@ def _topological(sinks: tuple[Signal, ...]) -> tuple[list[OutputSignal], list[bo
                 if st == 1:  # cannot happen through plug(); kept as a guard
                     raise CycleError(f"same-tick cycle through {d.name}", [d.name])
                 state[id(d)] = 1
-                stack.append((d, iter(d._srcs)))  # type: ignore[attr-defined]
+                stack.append((d, iter(sources(d))))  # type: ignore[arg-type]
                 break
             else:
                 stack.pop()
@@ -188,13 +211,14 @@ def _topological(sinks: tuple[Signal, ...]) -> tuple[list[OutputSignal], list[bo
         # only it is live (the outdated rule decides, as for the lazy pull).
         is_live = s.period == 1 and s.timeDependent
         if not is_live and s.period == 1:
-            for src in s._srcs:
+            f = fused.get(id(s))
+            for src in s._srcs if f is None else f[0]:
                 j = position.get(id(src))
                 if (j is not None and live[j]) or getattr(src, "_volatile", False):
                     is_live = True
                     break
         live.append(is_live)
-    return order, live
+    return order, live, fused
 
 
 class PeriodicCall:

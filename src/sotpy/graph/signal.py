@@ -202,6 +202,10 @@ class Signal:
         return "\n".join(lines)
 
 
+#: see :meth:`OutputSignal.setPlanFusion`
+_FusionHook = Callable[[], "tuple[tuple[Signal, ...], Callable[..., Any]] | None"]
+
+
 class OutputSignal(Signal):
     """A signal computed by a callback of its entity, or holding a constant.
 
@@ -216,6 +220,7 @@ class OutputSignal(Signal):
         "_callback",
         "_deps",
         "_fn",
+        "_fusion",
         "_srcs",
         "_volatile",
         "_withTime",
@@ -244,6 +249,9 @@ class OutputSignal(Signal):
         self._deps: tuple[Signal, ...] = ()
         self._srcs: tuple[Signal, ...] = ()
         self._volatile = callback is None
+        self._fusion: Callable[[], tuple[tuple[Signal, ...], Callable[..., Any]] | None] | None = (
+            None
+        )
         self.period = _check_period(self, period)
         self.timeDependent = (not dependencies) if timeDependent is None else timeDependent
         if callback is None:
@@ -323,6 +331,24 @@ class OutputSignal(Signal):
         self._mode = FUNCTION
         pool.version += 1
         _invalidate(self, force=True)
+
+    def setPlanFusion(self, hook: _FusionHook | None) -> None:
+        """Let compiled plans evaluate this output in one step over other signals.
+
+        ``hook()`` is called each time a :class:`~sotpy.graph.Plan` that needs this
+        output compiles (after any change of topology). It returns ``None`` (the plan
+        runs the callback over the dependencies, as usual) or ``(sources, fn)``: the
+        plan brings ``sources`` up to date instead of the dependencies and stores
+        ``fn(*values of sources)`` as this output's value. ``fn`` must give the value
+        the callback would give at the same tick: the entity vouches for it (e.g. the
+        SOT evaluating its tasks' features straight into its solver's rows, instead of
+        one plan step per feature and task signal). The dependencies, the lazy pull
+        from scripts and the shell, ``displayDependencies`` and ``writeGraph`` are
+        unchanged; a signal the fused step skips is still computed, by its callback,
+        when something reads it.
+        """
+        self._fusion = hook
+        pool.version += 1
 
     def setReady(self) -> None:
         """Recompute at the next read, even before the period elapsed (its entity

@@ -42,15 +42,19 @@ joint-limit level itself is always feasible: its bounds are clipped so that
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from typing import Any
 
 import numpy as np
 
+from .._jit import refused
 from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
 from ..graph import DOUBLE, VECTOR, Entity, Input, Output, command, plug
 from ..graph.pool import pool
+from ..tasks import _rowkernels
+from ..tasks.rows import BufferFull, computedByOwnCallback
 from ..tasks.task import TaskAbstract
 from .hierarchy import HierarchySolver
 
@@ -88,6 +92,8 @@ class SOT(Entity):
         self._warned = False
         self._limits: tuple[Any, ...] | None = None
         self._taskDamping: dict[str, float] = {}
+        self._rowsA = np.empty((64, self.nv))  # the fused tasks' rows (see _fusion)
+        self._rowsB = np.empty(64)
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
         for j in range(1, model.njoints):
@@ -103,6 +109,8 @@ class SOT(Entity):
         if source is not None:
             plug(source, self.position)
         self._rewire()
+        self._fuse = False
+        self.setTaskFusion(_rowkernels.pose_rows is not None)
 
     # -- the stack --------------------------------------------------------------------
     def _task(self, task: TaskAbstract | str, cmd: str) -> TaskAbstract:
@@ -258,20 +266,11 @@ class SOT(Entity):
         tasks in priority order, chained by red edges."""
         return [(f"SOT {self.name}", list(self._stack))]
 
-    # -- solve ------------------------------------------------------------------------
+    # -- solve ----------------------------------------------------------------------
     def _solve(self, values: tuple[Any, ...]) -> np.ndarray:
         nv = self.nv
         it = iter(values)
-        damping = float(next(it))
-        if not (math.isfinite(damping) and damping >= 0.0):
-            raise SignalTypeError(
-                f"{self.damping.name}: expected a finite damping >= 0, got {damping}"
-            )
-        levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        lams: list[float] = []
-        if self._jointLimits:
-            levels.append(self._limitLevel(next(it), next(it), next(it), next(it), next(it)))
-            lams.append(0.0)  # the joint limits: hard, never damped
+        levels, lams, damping = self._head(it)
         overrides = self._taskDamping
         ndarray = np.ndarray
         for task in self._stack:
@@ -287,8 +286,27 @@ class SOT(Entity):
                 b = next(it)
                 levels.append((J, b, b))
             lams.append(overrides.get(task.name, damping) if overrides else damping)
+        return self._finish(levels, lams)
+
+    def _head(self, it: Any) -> tuple[list[Any], list[float], float]:
+        """The damping and the joint-limit level, from the first values of ``control``'s
+        dependencies."""
+        damping = float(next(it))
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise SignalTypeError(
+                f"{self.damping.name}: expected a finite damping >= 0, got {damping}"
+            )
+        levels: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        lams: list[float] = []
+        if self._jointLimits:
+            levels.append(self._limitLevel(next(it), next(it), next(it), next(it), next(it)))
+            lams.append(0.0)  # the joint limits: hard, never damped
+        return levels, lams, damping
+
+    def _finish(self, levels: list[Any], lams: list[float]) -> np.ndarray:
+        """Solve ``levels``, keep the result, warn about an infeasible hard level."""
         if not levels:
-            return np.zeros(nv)
+            return np.zeros(self.nv)
         # one number when every level has the same damping (the usual undamped stack):
         # the solver then skips its per-level parsing
         result = self._solver.solve(levels, damping=lams if any(lams) else 0.0)
@@ -303,11 +321,115 @@ class SOT(Entity):
                     f"(violation {result.residuals[0]:.3g}); the control is the least "
                     "violating one (see sot.lastResult)",
                     SotpyWarning,
-                    stacklevel=2,
+                    stacklevel=3,
                 )
         else:
             self._warned = False
         return result.x
+
+    # -- fused evaluation of the tasks ------------------------------------------------
+    def _fusion(self) -> tuple[tuple[Any, ...], Any] | None:
+        """The plan's evaluation of ``control`` (see
+        :meth:`~sotpy.graph.signal.OutputSignal.setPlanFusion`): each equality task
+        that has a row writer (:mod:`sotpy.tasks.rows`) is read from its features'
+        inputs and written straight into the rows handed to the solver; the other
+        tasks through their signals. None (the usual step) when no task has a writer."""
+        if not computedByOwnCallback(self.control, SOT.control.fn):
+            return None
+        head = 6 if self._jointLimits else 1
+        sources: list[Any] = list(self.control._srcs[:head])
+        plan: list[tuple[Any, int]] = []
+        fused = False
+        for t in self._stack:
+            w = None if t.isInequality else t._rowWriter()  # type: ignore[attr-defined]
+            if w is None:
+                deps = [t.jacobian, *((t.lower, t.upper) if t.isInequality else (t.task,))]  # type: ignore[attr-defined]
+                plan.append((None, len(deps)))
+                sources += deps
+            else:
+                plan.append((w.write, len(w)))
+                sources += w.sources
+                fused = True
+        if not fused:
+            return None
+        return tuple(sources), functools.partial(self._solveFused, plan, head)
+
+    def _solveFused(self, plan: list[tuple[Any, int]], head: int, *values: Any) -> np.ndarray:
+        while True:
+            try:
+                levels, lams = self._fusedLevels(plan, head, values)
+                break
+            except BufferFull:
+                A = self._rowsA
+                self._rowsA = np.empty((2 * A.shape[0], self.nv))
+                self._rowsB = np.empty(2 * A.shape[0])
+            except TypeError as exc:
+                # a kernel refused its arguments (types it was not compiled for) or a
+                # callback failed: the signals decide, and raise if they fail too
+                x = self._solve(tuple(s.value for s in self.control._deps))
+                refused(f"SOT({self.name})'s task rows", exc)
+                self.setTaskFusion(False)
+                return x
+        if levels is None:  # a writer declined: the task signals, with their checks
+            return self._solve(tuple(s.value for s in self.control._deps))
+        return self._finish(levels, lams)
+
+    def _fusedLevels(
+        self, plan: list[tuple[Any, int]], head: int, values: tuple[Any, ...]
+    ) -> tuple[Any, list[float]]:
+        """The levels, the fused tasks' rows written into ``_rowsA``/``_rowsB``;
+        ``(None, [])`` when a writer declines or a row is not finite."""
+        nv = self.nv
+        levels, lams, damping = self._head(iter(values[:head]))
+        overrides = self._taskDamping
+        A, b = self._rowsA, self._rowsB
+        r = 0
+        o = head
+        ndarray = np.ndarray
+        for task, (write, n) in zip(self._stack, plan, strict=True):
+            if write is None:
+                J = values[o]
+                if type(J) is not ndarray or J.ndim != 2 or J.shape[1] != nv:
+                    return None, []
+                if task.isInequality:
+                    levels.append((J, values[o + 1], values[o + 2]))
+                else:
+                    levels.append((J, values[o + 1], values[o + 1]))
+            else:
+                k = write(values, o, A, b, r, 0.0)
+                if k < 0:
+                    return None, []
+                Ak, bk = A[r : r + k], b[r : r + k]
+                levels.append((Ak, bk, bk))
+                r += k
+            o += n
+            lams.append(overrides.get(task.name, damping) if overrides else damping)
+        if r:
+            Ar, br = A[:r], b[:r]
+            # finite iff the sums of squares are (an overflow: the signals decide)
+            if not (math.isfinite(np.vdot(Ar, Ar)) and math.isfinite(br.dot(br))):
+                return None, []
+        return levels, lams
+
+    @command
+    def setTaskFusion(self, enabled: bool) -> None:
+        """Evaluate the equality tasks' rows in one pass from their features' inputs
+        (default, with numba), or through each feature's and task's signals (see
+        ``docs/solvers.md``). The control is the same either way."""
+        if enabled and _rowkernels.pose_rows is None:
+            raise CommandError(
+                f"SOT({self.name}).setTaskFusion: the fused evaluation needs the compiled "
+                "kernels (numba missing or SOTPY_JIT=0)"
+            )
+        if enabled:
+            _rowkernels.warm_up()
+        self._fuse = bool(enabled)
+        self.control.setPlanFusion(self._fusion if self._fuse else None)
+
+    @command
+    def getTaskFusion(self) -> bool:
+        """Whether the tasks' rows are evaluated in one pass (see ``setTaskFusion``)."""
+        return self._fuse
 
     def _limitLevel(
         self, q: Any, lower: Any, upper: Any, vmax: Any, dt: float

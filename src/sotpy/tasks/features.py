@@ -50,6 +50,8 @@ from ..dynamics.types import SE3
 from ..errors import CommandError, EntityError, SignalTypeError
 from ..graph import DOUBLE, INT, MATRIX, VECTOR, Entity, Input, Output, SignalType, command, pool
 from ..graph.signal import Signal
+from . import _rowkernels
+from .rows import BufferFull, RowWriter, callbackWriter, computedByOwnCallback
 
 __all__ = [
     "FLAGS",
@@ -294,6 +296,7 @@ class FeatureAbstract(Entity):
                 "FeaturePose, FeatureGeneric, FeaturePosture, ... instead"
             )
         self._reference: FeatureAbstract | None = None
+        self._indexCache: tuple[Any, int, Any] = (None, -1, None)
         # the subclass's computations are the callbacks (no dispatch at each tick)
         self.error.setFunction(self._error)
         self.jacobian.setFunction(self._jacobian)
@@ -336,6 +339,35 @@ class FeatureAbstract(Entity):
             except ValueError as exc:
                 raise SignalTypeError(f"{self.selec.name}: {exc}") from None
         return rows
+
+    def _index(self, selec: Flags, n: int) -> np.ndarray:
+        """The rows selected by ``selec`` among ``n`` as an int64 array (all of them
+        when ``selec`` selects all), cached for the last ``(selec, n)``: what the row
+        kernels take."""
+        c = self._indexCache
+        if c[0] is selec and c[1] == n:
+            return c[2]
+        rows = self._rows(selec, n)
+        idx = np.arange(n, dtype=np.int64) if rows is None else np.array(rows, dtype=np.int64)
+        self._indexCache = (selec, n, idx)
+        return idx
+
+    def _rowWriter(self) -> RowWriter | None:
+        """How an SOT writes this feature's rows straight into its buffer (see
+        :mod:`sotpy.tasks.rows`); None if it must read the feature's signals. This one
+        calls the ``error`` and ``jacobian`` callbacks; the common features override
+        it with a compiled kernel."""
+        return callbackWriter(self.error, self.jacobian)
+
+    def _ownCallbacks(self, cls: type[FeatureAbstract]) -> bool:
+        """Whether this feature is exactly a ``cls`` whose ``error`` and ``jacobian``
+        compute with ``cls``'s methods at every tick (a row kernel may replace them)."""
+        return (
+            type(self) is cls
+            and _rowkernels.pose_rows is not None
+            and computedByOwnCallback(self.error, cls._error)
+            and computedByOwnCallback(self.jacobian, cls._jacobian)
+        )
 
     def _sizeError(self, sig: Signal, value: Any, expected: str) -> SignalTypeError:
         shape = getattr(value, "shape", None)
@@ -451,6 +483,36 @@ class FeatureGeneric(FeatureAbstract):
 
     def _jacobian(self, selec: Flags, J: np.ndarray) -> np.ndarray:
         return _take(J, self._rows(selec, J.shape[0]))
+
+    def _rowWriter(self) -> RowWriter | None:
+        if not self._ownCallbacks(FeatureGeneric):
+            return super()._rowWriter()
+        error, jacobian = self.error, self.jacobian
+        ne = len(error._srcs)  # (selec, errorIN[, reference's errorIN])
+        kernel = _rowkernels.generic_rows
+        ndarray = np.ndarray
+
+        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
+            selec, s = v[o], v[o + 1]
+            sdes = v[o + 2] if ne == 3 else _EMPTY
+            J = v[o + ne + 1]
+            if (
+                type(s) is not ndarray
+                or type(J) is not ndarray
+                or type(sdes) is not ndarray
+                or s.ndim != 1
+                or J.shape != (s.shape[0], A.shape[1])
+                or (ne == 3 and sdes.shape != s.shape)
+            ):
+                return -1  # the callbacks say what is wrong
+            idx = self._index(selec, s.shape[0])
+            k = idx.shape[0]
+            if r + k > A.shape[0]:
+                raise BufferFull
+            kernel(s, sdes, J, idx, A, b, r, gain)
+            return k
+
+        return RowWriter((*error._srcs, *jacobian._srcs), write)
 
     def _errordot(
         self, selec: Flags, s: np.ndarray, sdot: np.ndarray, sdesdot: np.ndarray | None = None
@@ -600,6 +662,34 @@ class FeaturePose(FeatureAbstract):
         rel, R = self._relative(M, Mdes)
         return self._poseJacobian(rel, R, rows, Jq)
 
+    def _rowWriter(self) -> RowWriter | None:
+        if not self._ownCallbacks(FeaturePose):
+            return super()._rowWriter()  # FeaturePoseSE3: its callbacks
+        kernel = _rowkernels.pose_rows
+        se3, ndarray = pin.SE3, np.ndarray
+        ref: list[Any] = [None, None, None]  # the reference and its arrays, by identity
+
+        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
+            selec, M, Mdes, Jq = v[o], v[o + 1], v[o + 2], v[o + 3]
+            if (
+                type(M) is not se3
+                or type(Mdes) is not se3
+                or type(Jq) is not ndarray
+                or Jq.shape != (6, A.shape[1])
+            ):
+                return -1
+            idx = self._index(selec, 6)
+            k = idx.shape[0]
+            if r + k > A.shape[0]:
+                raise BufferFull
+            if ref[0] is not Mdes:
+                ref[:] = Mdes, Mdes.rotation, Mdes.translation
+            kernel(M.rotation, M.translation, ref[1], ref[2], Jq, idx, A, b, r, gain)
+            return k
+
+        # the sources the jacobian callback reads (selec, position, reference, Jq)
+        return RowWriter(self.jacobian._srcs, write)
+
     def _errordot(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3, nu: np.ndarray) -> np.ndarray:
         rows = self._rows(selec, 6)
         if nu.shape != (6,):
@@ -704,6 +794,7 @@ class FeaturePosture(FeatureAbstract):
         if model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer":
             self._ffDofs = 6
         self._jcache: tuple[Flags, np.ndarray] | None = None
+        self._postureCache: tuple[Flags, Any] | None = None
         self._checked: np.ndarray | None = None  # the posture array last checked
         self.postureDot.setDefault(np.zeros(model.nv))
         default = Flags([False] * self._ffDofs, rest=True)
@@ -760,6 +851,47 @@ class FeaturePosture(FeatureAbstract):
         self._check(self.posture, qdes)
         D = pin.dDifference(self.model, qdes, q, pin.ArgumentPosition.ARG1)
         return D[idx]
+
+    def _postureIndex(self, selec: Flags) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(iq, iv)`` of the selected DoFs when each belongs to a joint whose
+        configuration is its coordinate (``nq = nv = 1``: ``difference(q*, q) = q -
+        q*``, Jacobian row the identity's); None otherwise. Cached for ``selec``."""
+        c = self._postureCache
+        if c is not None and c[0] is selec:
+            return c[1]
+        model = self.model
+        idx = self._index(selec, model.nv)
+        plan = None
+        if all(model.nqs[self._owner[i]] == 1 == model.nvs[self._owner[i]] for i in idx):
+            iq = np.array([model.idx_qs[self._owner[i]] for i in idx], dtype=np.int64)
+            plan = (iq, idx)
+        self._postureCache = (selec, plan)
+        return plan
+
+    def _rowWriter(self) -> RowWriter | None:
+        if not self._ownCallbacks(FeaturePosture):
+            return super()._rowWriter()
+        generic = super()._rowWriter()  # joints with a richer configuration
+        kernel = _rowkernels.posture_rows
+        ndarray = np.ndarray
+
+        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
+            selec, q, qdes = v[o], v[o + 1], v[o + 2]
+            plan = self._postureIndex(selec)
+            if plan is None or A.shape[1] != self.model.nv:
+                return generic.write(v, o, A, b, r, gain)  # type: ignore[union-attr]
+            if type(q) is not ndarray or type(qdes) is not ndarray:
+                return -1
+            self._check(self.state, q)  # the callbacks' checks, the same errors
+            self._check(self.posture, qdes)
+            iq, iv = plan
+            k = iv.shape[0]
+            if r + k > A.shape[0]:
+                raise BufferFull
+            kernel(q, qdes, iq, iv, A, b, r, gain)
+            return k
+
+        return None if generic is None else RowWriter(generic.sources, write)
 
     def _errordot(
         self, selec: Flags, q: np.ndarray, qdes: np.ndarray, vdes: np.ndarray

@@ -35,6 +35,7 @@ from ..errors import CommandError, EntityError, SignalTypeError, SotpyError
 from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, pool
 from ..graph.signal import Signal
 from .features import FLAGS, FeatureAbstract, Flags
+from .rows import RowWriter, computedByOwnCallback
 
 __all__ = ["Task", "TaskAbstract", "TaskInequality"]
 
@@ -293,6 +294,54 @@ class Task(TaskAbstract):
 
     def _wireOutputs(self) -> None:
         self.task.setDependencies([self.controlGain, self.error, *self._withDerivativeDeps()])
+
+    def _rowWriter(self) -> RowWriter | None:
+        """How an SOT writes this task's rows (``J``, ``-controlGain e``) straight into
+        its buffer, from its features' inputs (see :mod:`sotpy.tasks.rows`); None when
+        it must read ``jacobian`` and ``task`` (a derivative feed-forward, an output
+        set to a constant or given another callback, a feature without a writer)."""
+        if (
+            self._withDerivative
+            or not self._features
+            or not computedByOwnCallback(self.error, TaskAbstract.error.fn)
+            or not computedByOwnCallback(self.jacobian, TaskAbstract.jacobian.fn)
+            or not computedByOwnCallback(self.task, Task.task.fn)
+        ):
+            return None
+        parts: list[tuple[Any, int]] = []
+        sources: list[Any] = [self.controlSelec, self.controlGain]
+        for f in self._features:
+            w = f._rowWriter()
+            if w is None:
+                return None
+            parts.append((w.write, len(w)))
+            sources += w.sources
+        isfinite = math.isfinite
+
+        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
+            selec, gain = v[o], v[o + 1]
+            if type(gain) is not float or not (gain >= 0.0 and isfinite(gain)):
+                return -1  # the task callback says what is wrong
+            o += 2
+            r0 = r
+            for fn, n in parts:
+                k = fn(v, o, A, b, r, gain)
+                if k < 0:
+                    return -1
+                r += k
+                o += n
+            n = A.shape[1]
+            cols = selec._cache.get(n, _MISSING)
+            if cols is _MISSING:
+                try:
+                    cols = selec.rows(n)
+                except ValueError:
+                    return -1
+            if cols is not None:
+                A[r0:r] *= selec.mask(n)
+            return r - r0
+
+        return RowWriter(sources, write)
 
 
 class TaskInequality(TaskAbstract):
