@@ -21,6 +21,10 @@ Each step of the plan is one of two kinds:
   only if a dependency changed), so a subgraph of constants costs one comparison per
   tick and is recomputed only when a constant is written.
 
+An output with a fusion hook (:meth:`OutputSignal.setPlanFusion`) may be computed by
+one step over other signals than its dependencies: the plan orders those sources instead
+and skips the signals in between unless another step needs them.
+
 Both kinds recompute a signal at most once per tick and give the values the lazy pull
 would give. The plan assumes that a state signal is written at every tick at which the
 plan runs (that is what a device does); a live step run at a tick where its state did
