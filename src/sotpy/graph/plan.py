@@ -173,8 +173,12 @@ def _topological(
         if hook is not None and not node._withTime:
             f = hook()
             if f is not None:
-                fused[id(node)] = f
-                return f[0]
+                srcs = tuple(s._holder() for s in f[0])  # a plugged input: its source
+                fused[id(node)] = (srcs, f[1])
+                for s in srcs:  # so that a change upstream outdates the fused output
+                    if not any(r is node for r in s._fusedReaders):
+                        s._fusedReaders = (*s._fusedReaders, node)
+                return srcs
         return node._srcs
 
     for sink in sinks:

@@ -70,6 +70,7 @@ class Signal:
         "__weakref__",
         "_checked",
         "_dependants",
+        "_fusedReaders",
         "_invalid",
         "_mode",
         "_time",
@@ -95,6 +96,9 @@ class Signal:
         self._invalid = NEVER
         self._mode = UNSET
         self._dependants: list[Signal] = []
+        # outputs a compiled plan computes from this signal by a fused step (see
+        # OutputSignal.setPlanFusion): invalidation reaches them directly
+        self._fusedReaders: tuple[OutputSignal, ...] = ()
 
     # -- identity ---------------------------------------------------------------------
     @property
@@ -339,11 +343,12 @@ class OutputSignal(Signal):
         output compiles (after any change of topology). It returns ``None`` (the plan
         runs the callback over the dependencies, as usual) or ``(sources, fn)``: the
         plan brings ``sources`` up to date instead of the dependencies and stores
-        ``fn(*values of sources)`` as this output's value. ``fn`` must give the value
-        the callback would give at the same tick: the entity vouches for it (e.g. the
-        SOT evaluating its tasks' features straight into its solver's rows, instead of
-        one plan step per feature and task signal). The dependencies, the lazy pull
-        from scripts and the shell, ``displayDependencies`` and ``writeGraph`` are
+        ``fn(*values of sources)`` as this output's value (a plugged input stands for
+        its source). ``fn`` must give the value the callback would give at the same
+        tick, reading nothing but ``sources``: the entity vouches for it (e.g. the SOT
+        evaluating its tasks' features straight into its solver's rows, instead of one
+        plan step per feature and task signal). The dependencies, the lazy pull from
+        scripts and the shell, ``displayDependencies`` and ``writeGraph`` are
         unchanged; a signal the fused step skips is still computed, by its callback,
         when something reads it.
         """
@@ -661,7 +666,7 @@ def _invalidate_dependants(sig: Signal) -> None:
     """Push invalidation: every output reading ``sig`` (transitively) becomes outdated
     at the current tick. Stops at outputs already outdated (their dependants are)."""
     now = pool.time
-    stack = list(sig._dependants)
+    stack = [*sig._dependants, *sig._fusedReaders]
     while stack:
         s = stack.pop()
         if isinstance(s, OutputSignal):
@@ -671,6 +676,9 @@ def _invalidate_dependants(sig: Signal) -> None:
             if s._checked >= now:
                 s._checked = now - 1
         stack.extend(s._dependants)
+        # a fused step may have recomputed an output downstream of an output that
+        # stays invalidated (skipped by the step): reach it through its sources
+        stack.extend(s._fusedReaders)
 
 
 def _remove_dependant(sig: Signal, dependant: Signal) -> None:
