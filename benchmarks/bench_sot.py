@@ -260,18 +260,24 @@ class SotpyController:
     tasks: list[Task]
 
 
-def build_sotpy_reach(scene: ReachScene, levels: bool = False, prefix: str = "") -> SotpyController:
+def build_sotpy_reach(
+    scene: ReachScene, levels: bool = False, prefix: str = "", fused: bool = True
+) -> SotpyController:
     """The sotpy stand-and-reach graph, its entities named with ``prefix`` (several
     graphs can then share the pool; the caller clears the pool).
 
     Stack: joint limits (the SOT's hard level), feet + CoM (one task; three with
-    ``levels``), wrist position, posture.
+    ``levels``), wrist position, posture. ``fused=False``: the SOT reads its tasks
+    through their signals (``setTaskFusion(False)``) instead of writing their rows from
+    the features' inputs.
     """
     r = load_robot(scene.robot, prefix=prefix + scene.robot)
     dyn, dev = r.dynamic, r.device
     dev.set(scene.q0)
     sot = SOT(prefix + "sot", dyn)
     sot.dt.value = DT
+    if not fused:
+        sot.setTaskFusion(False)
     lf = MetaTaskKine6d(prefix + "lf", dyn, "left-ankle")
     rf = MetaTaskKine6d(prefix + "rf", dyn, "right-ankle")
     com = MetaTaskKineCom(dyn, prefix + "com")
@@ -637,6 +643,9 @@ def compare(
         "sotpy": lambda: SotpyRunner(build_sotpy_reach(scene), scene, ticks, True),
         "sotpy, feet/feet/CoM on 3 levels": lambda: SotpyRunner(
             build_sotpy_reach(scene, levels=True, prefix="l3_"), scene, ticks, True
+        ),
+        "sotpy, tasks through their signals": lambda: SotpyRunner(
+            build_sotpy_reach(scene, prefix="sig_", fused=False), scene, ticks, True
         ),
     }
     for s in solvers:

@@ -132,7 +132,12 @@ def test_compare_reports_every_contender(bench, monkeypatch):
     assert all(len(c.episodes) == 2 for c in contenders.values())
     assert all(len(e.tick) == 3 for c in contenders.values() for e in c.episodes)
     table = bench.compare_table(result)
-    assert table.count("\n| sotpy") == 2
+    assert table.count("\n| sotpy") == 3
+    # the same stack read through the task signals gives the same episode
+    fused, plain = (
+        contenders[k].episodes[0] for k in ("sotpy", "sotpy, tasks through their signals")
+    )
+    assert fused.errors == pytest.approx(plain.errors, abs=1e-12)
     if result["pink"]:
         assert result["fastest"] in contenders and len(result["ratios"]) == 2
         assert f"sotpy / {result['fastest']}" in table
@@ -147,7 +152,11 @@ def test_compare_reports_every_contender(bench, monkeypatch):
     # without Pink, the sotpy part still runs and the table says Pink was skipped
     monkeypatch.setattr(bench, "pink_available", lambda: False)
     result = bench.compare(ticks=2, repeats=1)
-    assert list(result["contenders"]) == ["sotpy", "sotpy, feet/feet/CoM on 3 levels"]
+    assert list(result["contenders"]) == [
+        "sotpy",
+        "sotpy, feet/feet/CoM on 3 levels",
+        "sotpy, tasks through their signals",
+    ]
     assert result["fastest"] is None and result["ratios"] == []
     assert "Pink skipped" in bench.compare_table(result)
 
