@@ -246,10 +246,15 @@ class SOT(Entity):
             self._rewire()
             raise
 
-    def _rewire(self) -> None:
+    def _headDeps(self) -> list[Any]:
+        """What ``control`` reads before the tasks (see :meth:`_head`)."""
         deps: list[Any] = [self.damping]
         if self._jointLimits:
             deps += [self.position, self.lowerJl, self.upperJl, self.upperVl, self.dt]
+        return deps
+
+    def _rewire(self) -> None:
+        deps = self._headDeps()
         for t in self._stack:
             deps.append(t.jacobian)
             deps += [t.lower, t.upper] if t.isInequality else [t.task]
@@ -272,7 +277,7 @@ class SOT(Entity):
         tasks in priority order, chained by red edges."""
         return [(f"SOT {self.name}", list(self._stack))]
 
-    # -- solve ----------------------------------------------------------------------
+    # -- solve ------------------------------------------------------------------------
     def _solve(self, values: tuple[Any, ...]) -> np.ndarray:
         nv = self.nv
         it = iter(values)
@@ -342,25 +347,28 @@ class SOT(Entity):
         tasks through their signals. None (the usual step) when no task has a writer."""
         if not computedByOwnCallback(self.control, SOT.control.fn):
             return None
-        head = 6 if self._jointLimits else 1
-        sources: list[Any] = list(self.control._srcs[:head])
-        plan: list[tuple[Any, int]] = []
+        sources: list[Any] = self._headDeps()
+        head = len(sources)
+        # the stack as it is now (an edit recompiles the plan, which calls this again)
+        plan: list[tuple[TaskAbstract, Any, int]] = []
         fused = False
         for t in self._stack:
             w = None if t.isInequality else t._rowWriter()  # type: ignore[attr-defined]
             if w is None:
                 deps = [t.jacobian, *((t.lower, t.upper) if t.isInequality else (t.task,))]  # type: ignore[attr-defined]
-                plan.append((None, len(deps)))
+                plan.append((t, None, len(deps)))
                 sources += deps
             else:
-                plan.append((w.write, len(w)))
+                plan.append((t, w.write, len(w)))
                 sources += w.sources
                 fused = True
         if not fused:
             return None
         return tuple(sources), functools.partial(self._solveFused, plan, head)
 
-    def _solveFused(self, plan: list[tuple[Any, int]], head: int, *values: Any) -> np.ndarray:
+    def _solveFused(
+        self, plan: list[tuple[TaskAbstract, Any, int]], head: int, *values: Any
+    ) -> np.ndarray:
         while True:
             try:
                 levels, lams = self._fusedLevels(plan, head, values)
@@ -381,7 +389,7 @@ class SOT(Entity):
         return self._finish(levels, lams)
 
     def _fusedLevels(
-        self, plan: list[tuple[Any, int]], head: int, values: tuple[Any, ...]
+        self, plan: list[tuple[TaskAbstract, Any, int]], head: int, values: tuple[Any, ...]
     ) -> tuple[Any, list[float]]:
         """The levels, the fused tasks' rows written into ``_rowsA``/``_rowsB``;
         ``(None, [])`` when a writer declines or a row is not finite."""
@@ -392,7 +400,7 @@ class SOT(Entity):
         r = 0
         o = head
         ndarray = np.ndarray
-        for task, (write, n) in zip(self._stack, plan, strict=True):
+        for task, write, n in plan:
             if write is None:
                 J = values[o]
                 if type(J) is not ndarray or J.ndim != 2 or J.shape[1] != nv:
@@ -421,7 +429,7 @@ class SOT(Entity):
     def setTaskFusion(self, enabled: bool) -> None:
         """Evaluate the equality tasks' rows in one pass from their features' inputs
         (default, with numba), or through each feature's and task's signals (see
-        ``docs/solvers.md``). The control is the same either way."""
+        ``docs/tasks.md``, "Fused rows"). The control is the same either way."""
         if enabled and _rowkernels.pose_rows is None:
             raise CommandError(
                 f"SOT({self.name}).setTaskFusion: the fused evaluation needs the compiled "
