@@ -7,8 +7,9 @@ task output (about twenty for a stand-and-reach stack), each building its own ar
 A :class:`RowWriter` computes the same numbers from the signals those outputs read
 (the features' inputs: placements, Jacobians, selections, references; the task's
 gain and column selection) and writes them into rows of one buffer: one compiled call
-per :class:`~sotpy.tasks.FeaturePose`, :class:`~sotpy.tasks.FeatureGeneric` or
-:class:`~sotpy.tasks.FeaturePosture` (the kernels of ``_rowkernels``), the feature's
+per :class:`~sotpy.tasks.features.FeaturePose`,
+:class:`~sotpy.tasks.features.FeatureGeneric` or
+:class:`~sotpy.tasks.features.FeaturePosture` (the kernels of ``_rowkernels``), the feature's
 own callbacks for any other feature.
 
 Rules that keep it exact (see ``docs/tasks.md``):
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..graph.signal import FUNCTION, OutputSignal, Signal
 
-__all__ = ["BufferFull", "RowWriter", "computedByOwnCallback"]
+__all__ = ["BufferFull", "RowWriter", "WriteFn", "callbackWriter", "computedByOwnCallback"]
 
 #: ``write(values, offset, A, b, r, gain) -> rows written, or -1``: ``values[offset:]``
 #: are the values of the writer's sources, in order; rows go to ``A[r:]``, ``b[r:]``.
