@@ -15,12 +15,9 @@ and task signals.
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
 import warnings
 from collections import Counter
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -35,7 +32,6 @@ from sotpy.solvers import SOT
 from sotpy.tasks import FeatureGeneric, FeaturePose, FeaturePosture, Task, TaskInequality
 from sotpy.tasks import _rowkernels as rk
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_sot.py"
 DT = 0.001
 TICKS = 50
 ON, OFF = "fusedX_", "plainX_"  # entity name prefixes of the two graphs
@@ -250,34 +246,22 @@ def test_same_tick_constant_write_outdates_a_fused_output():
 
 # -- SOT level: the stand-and-reach graph, fused and not --------------------------------
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_sot", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    try:
-        spec.loader.exec_module(module)
-        yield module
-    finally:
-        sys.modules.pop(spec.name, None)
-
-
-@pytest.fixture(scope="module")
-def scenes(bench):
+def scenes(bench_sot):
     cache: dict = {}
 
     def get(robot: str):
         if robot not in cache:
-            cache[robot] = bench.reach_scene(robot)
+            cache[robot] = bench_sot.reach_scene(robot)
         return cache[robot]
 
     return get
 
 
-def build_pair(bench, scene):
+def build_pair(bench_sot, scene):
     """The reach graph twice in the pool: ``ON`` with fusion (the default), ``OFF``
     without."""
-    on = bench.build_sotpy_reach(scene, prefix=ON)
-    off = bench.build_sotpy_reach(scene, prefix=OFF)
+    on = bench_sot.build_sotpy_reach(scene, prefix=ON)
+    off = bench_sot.build_sotpy_reach(scene, prefix=OFF)
     assert on.sot.getTaskFusion() is True  # on by default with numba
     off.sot.setTaskFusion(False)
     assert off.sot.getTaskFusion() is False
@@ -329,9 +313,9 @@ def entity(name: str):
 
 @needs_kernels
 @pytest.mark.parametrize("robot", ["talos", "nao"])
-def test_fused_and_unfused_reach_give_the_same_control(bench, scenes, robot):
+def test_fused_and_unfused_reach_give_the_same_control(bench_sot, scenes, robot):
     scene = scenes(robot)
-    on, off = build_pair(bench, scene)
+    on, off = build_pair(bench_sot, scene)
     tick_both(on, off, TICKS)
     # the run did something: the wrist moved towards its target, the feet stayed (up to
     # the integration's drift, micrometres)
@@ -342,9 +326,9 @@ def test_fused_and_unfused_reach_give_the_same_control(bench, scenes, robot):
 
 
 @needs_kernels
-def test_fused_plan_skips_task_signals_which_still_read_correctly(bench, scenes):
+def test_fused_plan_skips_task_signals_which_still_read_correctly(bench_sot, scenes):
     scene = scenes("talos")
-    on, off = build_pair(bench, scene)
+    on, off = build_pair(bench_sot, scene)
     tick_both(on, off, TICKS)
     steps_on = set(map(id, on.device._controlPlan.steps))
     steps_off = set(map(id, off.device._controlPlan.steps))
@@ -374,7 +358,7 @@ def test_fused_plan_skips_task_signals_which_still_read_correctly(bench, scenes)
     np.testing.assert_allclose(rh.error.value, e, rtol=0, atol=1e-12)
     np.testing.assert_allclose(rh.jacobian.value, J, rtol=0, atol=1e-12)
     task = entity(f"task{ON}rh")
-    np.testing.assert_allclose(task.task.value, -bench.GAINS["wrist"] * e, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(task.task.value, -bench_sot.GAINS["wrist"] * e, rtol=0, atol=1e-12)
 
 
 # faults: (apply, fix, what the message must name), each given (controller, prefix)
@@ -382,15 +366,15 @@ def _gain_fault(c, p):
     c.tasks[0].controlGain.value = -1.0
 
 
-def _gain_fix(c, p, bench):
-    c.tasks[0].controlGain.value = bench.GAINS["feet"]
+def _gain_fix(c, p, bench_sot):
+    c.tasks[0].controlGain.value = bench_sot.GAINS["feet"]
 
 
 def _inf_reference(c, p):
     entity(f"featureDes{p}com").errorIN.value = [np.inf, 0.0, 0.0]
 
 
-def _reference_fix(c, p, bench):
+def _reference_fix(c, p, bench_sot):
     entity(f"featureDes{p}com").errorIN.value = entity(f"{p}talos_dynamic").com.value
 
 
@@ -412,7 +396,7 @@ def _long_selection(c, p):
     entity(f"feature{p}rh").selec.value = "1110001"  # row 6 of a 6-row feature
 
 
-def _selection_fix(c, p, bench):
+def _selection_fix(c, p, bench_sot):
     entity(f"feature{p}rh").selec.value = "111000"
 
 
@@ -420,7 +404,7 @@ def _jq_rows(c, p):
     entity(f"feature{p}rh").Jq.value = np.ones((5, c.sot.nv))
 
 
-def _jq_fix(c, p, bench):
+def _jq_fix(c, p, bench_sot):
     plug(entity(f"{p}talos_dynamic").signal("Jright-wrist"), entity(f"feature{p}rh").Jq)
 
 
@@ -428,7 +412,7 @@ def _posture_size(c, p):
     entity(f"feature{p}posture").posture.value = np.zeros(3)
 
 
-def _posture_fix(c, p, bench):
+def _posture_fix(c, p, bench_sot):
     entity(f"feature{p}posture").posture.value = entity(f"{p}talos_device").state.value
 
 
@@ -436,7 +420,7 @@ def _com_width(c, p):
     entity(f"feature{p}com").jacobianIN.value = np.ones((3, c.sot.nv + 1))
 
 
-def _com_width_fix(c, p, bench):
+def _com_width_fix(c, p, bench_sot):
     dyn = entity(f"{p}talos_dynamic")
     plug(dyn.Jcom, entity(f"feature{p}com").jacobianIN)
 
@@ -454,9 +438,9 @@ FAULTS = {
 
 @needs_kernels
 @pytest.mark.parametrize("fault", list(FAULTS))
-def test_errors_with_fusion_are_those_of_the_signals(bench, scenes, fault):
+def test_errors_with_fusion_are_those_of_the_signals(bench_sot, scenes, fault):
     apply, fix, names = FAULTS[fault]
-    on, off = build_pair(bench, scenes("talos"))
+    on, off = build_pair(bench_sot, scenes("talos"))
     tick_both(on, off, 5)
     caught = {}
     for c, p in ((on, ON), (off, OFF)):
@@ -474,7 +458,7 @@ def test_errors_with_fusion_are_those_of_the_signals(bench, scenes, fault):
     assert names.format(p=ON) in str(caught[ON])
     # fixed, the loop runs again, fused, with the same control as the unfused graph
     for c, p in ((on, ON), (off, OFF)):
-        fix(c, p, bench)
+        fix(c, p, bench_sot)
     tick_both(on, off, 5)
     assert on.sot.getTaskFusion() is True
     steps = set(map(id, on.device._controlPlan.steps))
@@ -482,9 +466,9 @@ def test_errors_with_fusion_are_those_of_the_signals(bench, scenes, fault):
 
 
 @needs_kernels
-def test_adaptive_gain_and_tracer_read_task_error_with_fusion(bench, scenes):
+def test_adaptive_gain_and_tracer_read_task_error_with_fusion(bench_sot, scenes):
     scene = scenes("talos")
-    on, off = build_pair(bench, scene)
+    on, off = build_pair(bench_sot, scene)
     tracers = {}
     for c, p in ((on, ON), (off, OFF)):
         entity(f"gain{p}rh").set(6.0, 3.0, 20.0)  # reads the wrist task's error
@@ -519,8 +503,8 @@ def test_adaptive_gain_and_tracer_read_task_error_with_fusion(bench, scenes):
 
 
 @needs_kernels
-def test_switching_fusion_off_and_on_while_running_keeps_the_control(bench, scenes):
-    on, off = build_pair(bench, scenes("talos"))
+def test_switching_fusion_off_and_on_while_running_keeps_the_control(bench_sot, scenes):
+    on, off = build_pair(bench_sot, scenes("talos"))
     rh_task = entity(f"task{ON}rh").task
     tick_both(on, off, 15)
     assert rh_task not in on.device._controlPlan.steps
@@ -615,8 +599,8 @@ def test_mixed_stack_with_inequalities_and_unfused_tasks():
 
 
 @needs_kernels
-def test_kernels_refusing_a_fortran_jacobian_fall_back_with_a_warning(bench, scenes):
-    on, off = build_pair(bench, scenes("talos"))
+def test_kernels_refusing_a_fortran_jacobian_fall_back_with_a_warning(bench_sot, scenes):
+    on, off = build_pair(bench_sot, scenes("talos"))
     tick_both(on, off, 3)
     for p in (ON, OFF):
         f = entity(f"feature{p}com")
