@@ -1,5 +1,5 @@
 r"""Compiled kernels that write task rows straight into a solver's stacked buffer
-(internal to ``sotpy.tasks``; used by :mod:`.rows`).
+(internal to ``sotpy.tasks``: the row writers of the features, :mod:`.rows`).
 
 Each kernel writes, for the selected rows ``k`` of one feature, the Jacobian row into
 ``A[r + i, :]`` and the equality target ``-gain * e_k`` into ``b[r + i]``: the values
@@ -149,7 +149,7 @@ _warm: list[bool] = []
 
 
 def log3(R: np.ndarray) -> np.ndarray:
-    """The compiled ``log3`` (tests compare it with Pinocchio's); None without numba."""
+    """The compiled ``log3`` (tests compare it with Pinocchio's; needs numba)."""
     out = np.empty(3)
     _log3_c(np.ascontiguousarray(R, dtype=float), out)  # type: ignore[misc]
     return out
