@@ -360,3 +360,174 @@ def test_a_point_outside_the_box_goes_on_with_its_bounds_fixed(seed, free_calls)
         res = solver.solve(wide)
         assert_same(wide, res, x_wide, opt_wide)
     assert res.method == "shortcut" and free_calls["answered"] >= 2
+
+
+# ------------------------------------------------------------ posture-shaped last level
+def posture_stack(rng, n_base, n_joints, selected, tight=0.5):
+    """An SOT-like stack: joint limits on the joints (the first ``n_base`` variables,
+    a free flyer, unbounded), upper levels of ``n_base + 5`` and 3 rows met inside the
+    box, and a posture on the joints ``selected`` (rows of the identity, in a shuffled
+    order) whose target pulls some joints onto their limits."""
+    n = n_base + n_joints
+    half = rng.uniform(0.2, 0.8, n_joints)
+    box = (np.hstack([np.zeros((n_joints, n_base)), np.eye(n_joints)]), -half, half)
+    inside = np.concatenate([rng.standard_normal(n_base), rng.uniform(-0.3, 0.3, n_joints) * half])
+    levels = [box]
+    for m in (n_base + 5, 3):
+        A = rng.standard_normal((m, n))
+        b = A @ inside
+        levels.append((A, b, b))
+    cols = n_base + rng.permutation(np.asarray(selected))
+    P = np.zeros((len(cols), n))
+    P[np.arange(len(cols)), cols] = 1.0
+    target = rng.uniform(-1.5, 1.5, len(cols)) * half[cols - n_base] / tight
+    levels.append((P, target, target))
+    return levels
+
+
+def kernel_inputs(levels, at_lo, at_hi):
+    """The compiled kernel's inputs for ``levels`` (as the solver stacks them) and the
+    fixed/free split of the guess ``at_lo | at_hi``, with the scratch arrays."""
+    solver = HierarchySolver()
+    st, _ = solver._prepare(levels)
+    box = solver._box(st)
+    n = solver.n
+    held = at_lo | at_hi
+    W = np.flatnonzero(held).astype(np.int64)
+    F = np.flatnonzero(~held).astype(np.int64)
+    vals = np.where(at_lo, box.lo, box.hi)[W]
+    scratch = (
+        np.empty(64 * (n + st.A.shape[0] + 2)),
+        np.empty(n, dtype=np.int32),
+        np.zeros(8, dtype=np.int32),
+        np.zeros(3, dtype=np.uint8),
+    )
+    return st.A, int(st.starts[1]), int(st.starts[st.last]), W, vals, F, scratch
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_posture_split_gives_the_general_solve(seed):
+    """The posture-shaped solve (free flyer ``N`` from a QR of its upper columns, the
+    joints by a minimum-norm correction) against the general null-space solve on the
+    same kernel inputs: the same point and the same upper multipliers, for random
+    guesses of the fixed joints."""
+    rng = np.random.default_rng(5100 + seed)
+    n_base, n_joints = 6, int(rng.integers(14, 30))
+    selected = np.arange(n_joints) if seed % 2 else rng.permutation(n_joints)[: n_joints - 2]
+    levels = posture_stack(rng, n_base, n_joints, selected)
+    n = n_base + n_joints
+    at_lo = np.zeros(n, dtype=bool)
+    at_hi = np.zeros(n, dtype=bool)
+    fixed = n_base + rng.choice(n_joints, size=int(rng.integers(0, 5)), replace=False)
+    at_lo[fixed[::2]] = True
+    at_hi[fixed[1::2]] = True
+    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, at_lo, at_hi)
+    mu_ = split - s1
+    row_of = _boxkkt._posture_columns(A, split)
+    assert len(row_of) == n
+    x_p, mu_p = np.ones(n + 1), np.zeros(mu_)
+    ok = _boxkkt._posture_solve(
+        A, s1, mu_, row_of, W, vals, F, x_p, mu_p, 1e-9, work, iwork, iw, ch
+    )
+    assert ok
+    x_g, mu_g, g = np.ones(n + 1), np.zeros(mu_), np.empty(n)
+    ml = A.shape[0] - split
+    assert _boxkkt._general_solve(
+        A, s1, split, mu_, ml, False, W, vals, F, x_g, g, mu_g, 1e-9, work, iwork, iw, ch
+    )
+    np.testing.assert_allclose(x_p, x_g, atol=1e-11 * (1 + np.abs(x_g).max()))
+    np.testing.assert_allclose(mu_p, mu_g, atol=1e-10 * (1 + np.abs(mu_g).max()))
+    # and both are the KKT point: upper rows met, stationarity on the free variables
+    U = A[s1:split]
+    np.testing.assert_allclose(U @ x_p, 0.0, atol=1e-10 * (1 + np.abs(x_p).max()))
+    np.testing.assert_allclose((g + U[:, :n].T @ mu_p)[F], 0.0, atol=1e-9)
+
+
+def test_posture_columns_recognises_only_rows_of_the_identity():
+    n = 6
+    P = np.zeros((3, n))
+    P[[0, 1, 2], [4, 2, 5]] = 1.0
+    A = np.hstack([np.vstack([np.ones((2, n)), P]), np.zeros((5, 1))])
+    np.testing.assert_array_equal(_boxkkt._posture_columns(A, 2), [-1, -1, 3, -1, 2, 4])
+    for spoil in ("scaled", "two entries", "same column", "empty row"):
+        B = A.copy()
+        if spoil == "scaled":
+            B[3, 2] = 2.0
+        elif spoil == "two entries":
+            B[3, 0] = 0.5
+        elif spoil == "same column":
+            B[4] = B[3]
+        else:
+            B[4, :n] = 0.0
+        assert len(_boxkkt._posture_columns(B, 2)) == 0, spoil
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_posture_stack_is_answered_by_the_kernel(seed, statuses):
+    """SOT-shaped stacks (joint limits, a free flyer, a posture on all or some joints):
+    every answer is the reference cascade's and the NumPy path's, ranks included, and
+    the compiled call proves it."""
+    rng = np.random.default_rng(5200 + seed)
+    n_joints = int(rng.integers(12, 32))
+    selected = np.arange(n_joints) if seed < 4 else np.arange(3, n_joints)  # 3 left out
+    levels = posture_stack(rng, 6, n_joints, selected)
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    numpy_path = HierarchySolver(jit=False)
+    for _ in range(2):  # the second call from the guess of the first (as tick to tick)
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+        other = numpy_path.solve(levels)
+    np.testing.assert_allclose(res.x, other.x, atol=1e-9 * (1 + np.abs(other.x).max()))
+    np.testing.assert_array_equal(res.ranks, other.ranks)
+    assert res.method == other.method == "active-set"
+    assert statuses[_boxkkt.OK] >= 1, statuses
+    held = np.isclose(np.abs(res.x[6:]), levels[0][2], rtol=0, atol=1e-12)
+    if seed < 4:
+        assert held.any()  # the posture pulled joints onto their limits
+
+
+def test_posture_split_refuses_a_free_flyer_the_upper_levels_do_not_see():
+    """A free-flyer direction that no upper row moves: the posture leaves it free
+    (rank-deficient ``U_N``), the split refuses, and so does the general solve (the
+    minimum-norm rule must decide that direction): the NumPy path answers, with the
+    cascade's answer."""
+    rng = np.random.default_rng(5300)
+    levels = posture_stack(rng, 6, 14, np.arange(14))
+    for k in (1, 2):
+        A, b, _ = levels[k]
+        A = A.copy()
+        A[:, 2] = 0.0
+        levels[k] = (A, b, b)
+    n = 20
+    none = np.zeros(n, dtype=bool)
+    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, none, none)
+    mu_ = split - s1
+    row_of = _boxkkt._posture_columns(A, split)
+    x, mu = np.ones(n + 1), np.zeros(mu_)
+    assert not _boxkkt._posture_solve(
+        A, s1, mu_, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
+    )
+    x_ref, optimal = cascade_hierarchy(levels)
+    assert_same(levels, HierarchySolver().solve(levels), x_ref, optimal)
+
+
+def test_posture_split_refuses_dependent_upper_rows():
+    """Upper rows that repeat each other (``M`` of deficient row rank): the split
+    refuses rather than dividing by a vanishing pivot."""
+    rng = np.random.default_rng(5400)
+    levels = posture_stack(rng, 6, 14, np.arange(14))
+    A, b, _ = levels[1]
+    A = np.vstack([A, A[0]])
+    b = np.append(b, b[0])
+    levels[1] = (A, b, b)
+    n = 20
+    none = np.zeros(n, dtype=bool)
+    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, none, none)
+    mu_ = split - s1
+    row_of = _boxkkt._posture_columns(A, split)
+    x, mu = np.ones(n + 1), np.zeros(mu_)
+    assert not _boxkkt._posture_solve(
+        A, s1, mu_, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
+    )
+    np.testing.assert_array_equal(x, 1.0)  # nothing written
