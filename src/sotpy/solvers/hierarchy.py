@@ -81,6 +81,7 @@ See ``docs/solvers.md`` for the details and the measured costs.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -200,6 +201,7 @@ class _Structure:
         "A",
         "Aeq",
         "Ain",
+        "An",
         "active",
         "all_eq",
         "blocks",
@@ -339,9 +341,56 @@ class HierarchySolver:
         reach). Raises :class:`SolverError` on malformed input, naming the level and
         row.
         """
+        st, parsed = self._prepare(levels)
+        return self._solve_prepared(st, parsed, damping)
+
+    def stacked(self, sizes: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+        """The solver's own stacked buffers, to write a stack into in place instead of
+        passing it to :meth:`solve` (which copies every level into them).
+
+        Returns ``(A, lower, upper, starts)``: ``A`` an ``m x n`` view (``m =
+        sum(sizes)``), ``lower`` and ``upper`` of length ``m``; level ``k`` is rows
+        ``starts[k]:starts[k + 1]``. Write every row, then call :meth:`solve_stacked`.
+        The buffers are the solver's: they stay valid until a call with other sizes
+        (by :meth:`solve` or :meth:`stacked`), and their content until the next call.
+        Needs ``n`` (given to the constructor or taken from a first solve).
+        """
+        st = self._structure
+        if st is not None and st.sizes == sizes:  # the usual call: the same sizes
+            return st.An, st.lo, st.up, st.starts
+        n = self.n
+        if n is None:
+            raise SolverError(
+                "HierarchySolver.stacked: the number of variables is unknown"
+                " (give n to the constructor, or solve once)"
+            )
+        sizes = tuple(int(m) for m in sizes)
+        if any(m < 0 for m in sizes):
+            raise SolverError(f"HierarchySolver.stacked: negative level size in {sizes}")
+        st = self._structure
+        if st is None or st.sizes != sizes or st.A.shape[1] != n + 1:
+            st = self._new_structure(sizes, n)
+        return st.An, st.lo, st.up, st.starts
+
+    def solve_stacked(self, damping=None, *, equality: bool = False) -> HierarchyResult:
+        """Solve the stack written into the buffers of :meth:`stacked`: the same
+        answer, checks and errors as :meth:`solve` on those levels, without the copy.
+
+        ``equality=True`` says that every row is an equality ``A_k x = lower_k``
+        (``upper`` is not read); else ``lower <= A x <= upper`` row by row, as in
+        :meth:`solve`.
+        """
+        st = self._structure
+        if st is None:
+            raise SolverError("HierarchySolver.solve_stacked: call stacked(sizes) first")
+        parsed = _StackedLevels(st, equality)
+        self._bookkeep(st, parsed, not equality)
+        return self._solve_prepared(st, parsed, damping)
+
+    def _solve_prepared(self, st: _Structure, parsed, damping) -> HierarchyResult:
+        """:meth:`solve` once the levels are in the stacked buffers."""
         if damping is None:
             damping = self.damping
-        st, parsed = self._prepare(levels)
         lams = _dampings(damping, len(st.sizes))
         if st.all_eq and self.jit:
             result = self._equality_compiled(st, parsed, lams)
@@ -422,10 +471,28 @@ class HierarchySolver:
                 A_st[s:e, :n] = A
                 lo_st[s:e] = lo
                 up_st[s:e] = lo if up is None else up
+        else:
+            lo_st = st.lo
+            for k, (A, lo, _) in enumerate(parsed):
+                s, e = starts[k], starts[k + 1]
+                A_st[s:e, :n] = A
+                lo_st[s:e] = lo
+        self._bookkeep(st, parsed, general)
+        return st, parsed
+
+    def _bookkeep(self, st: _Structure, parsed, general: bool) -> None:
+        """Once ``A`` and the bounds are in the stacked buffers: the augmented column,
+        the relative bounds, the checks (naming what ``parsed`` holds) and the row
+        classes. ``general``: ``upper`` is written (else every row is ``A x =
+        lower``)."""
+        n = self.n
+        A_st = st.A
+        if general:
+            lo_st, up_st = st.lo, st.up
             if self.jit:
                 done = self._bounds_compiled(st, parsed)
                 if done:
-                    return st, parsed
+                    return
             # augmented column -ref, ref a finite bound of each row (the lower one, else
             # the upper one, else 0): rlo = lower - ref and rup = upper - ref bound A x - ref
             ref = st.ref
@@ -437,10 +504,7 @@ class HierarchySolver:
             np.subtract(lo_st, ref, out=st.rlo)
             np.subtract(up_st, ref, out=st.rup)
         else:
-            for k, (A, lo, _) in enumerate(parsed):
-                s, e = starts[k], starts[k + 1]
-                A_st[s:e, :n] = A
-                np.negative(lo, out=A_st[s:e, n])
+            np.negative(st.lo, out=A_st[:, n])
         # Frobenius norm of every level (the scale of its rank threshold); the compiled
         # equality path computes it (and checks it) itself
         if general or not self.jit:
@@ -458,7 +522,6 @@ class HierarchySolver:
             key = None
         if key != st.key:
             self._classify(st, key)
-        return st, parsed
 
     def _bounds_compiled(self, st: _Structure, parsed) -> bool:
         """The general path's bookkeeping after the copy (references, relative bounds,
@@ -493,6 +556,7 @@ class HierarchySolver:
         st.slices = [slice(starts[k], starts[k + 1]) for k in range(len(sizes))]
         mtot = starts[-1]
         st.A = np.zeros((mtot, n + 1))
+        st.An = st.A[:, :n]
         st.lo = np.zeros(mtot)
         st.up = np.zeros(mtot)
         st.d = np.zeros(mtot)
@@ -1576,6 +1640,23 @@ def _as_vector(v, k: int, name: str, m: int) -> np.ndarray:
             f"level {k}: {name} has shape {v.shape}, expected ({m},) (A has {m} rows)"
         )
     return v
+
+
+class _StackedLevels:
+    """The levels written into a solver's stacked buffers, as the ``(A, lower,
+    upper)`` views the error reports iterate over (``upper`` None for equalities)."""
+
+    __slots__ = ("equality", "st")
+
+    def __init__(self, st: _Structure, equality: bool) -> None:
+        self.st = st
+        self.equality = equality
+
+    def __iter__(self):
+        st = self.st
+        for k in range(len(st.sizes)):
+            sl = st.slices[k]
+            yield st.An[sl], st.lo[sl], None if self.equality else st.up[sl]
 
 
 def _raise_nonfinite_matrix(parsed) -> None:
