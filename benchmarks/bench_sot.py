@@ -33,10 +33,12 @@ displacement ``dq = v dt``: with ``alpha_i = lambda_i dt`` a task met exactly de
 the same rate. So both use :data:`GAINS` (``alpha = lambda dt`` on Pink's side); the
 wrist is the only task that starts with an error.
 
-Timers. sotpy's breakdown wraps the SOT solver's ``solve`` and the device's integration
-step (``Device._step``) with timers, on these instances only: ``solve`` and
-``integration`` are their times, ``graph + kinematics`` the rest of the tick (plan,
-op points, features, tasks, the joint-limit level, checks, state writes). On Pink's side
+Timers. sotpy's breakdown wraps the SOT solver's ``solve`` and ``solve_stacked`` (the
+call once the SOT writes its rows into the solver's buffers; the copy into the buffers
+is then in the graph's share) and the device's integration step (``Device._step``) with
+timers, on these instances only: ``solve`` and ``integration`` are their times,
+``graph + kinematics`` the rest of the tick (plan, op points, features, tasks, the
+joint-limit level, checks, state writes). On Pink's side
 ``qpsolvers.solve_problem`` is timed the same way (the "solver call": the QP back-end
 with qpsolvers' conversions). Each timer costs about 0.3 us per call; both sides carry
 theirs in the comparison.
@@ -313,7 +315,7 @@ class SotpyRunner:
     """Runs a :class:`SotpyController` tick by tick, in chunks (see :func:`interleave`).
 
     One tick is ``device.increment(DT)``, timed. With ``breakdown``, the SOT solver's
-    ``solve`` and the device's integration step (private attributes, wrapped on these
+    ``solve`` and ``solve_stacked`` and the device's integration step (private attributes, wrapped on these
     instances only, until :meth:`finish`) are timed too (about 0.3 us per call)."""
 
     def __init__(
@@ -332,9 +334,13 @@ class SotpyRunner:
         self.failure: str | None = None
         dev, sot = controller.device, controller.sot
         if breakdown:
+            # the solver is called with the levels (solve) or, once the SOT writes its
+            # rows in place, on its own buffers (solve_stacked): one timer for both
             self._solve = _Timed(sot._solver.solve)
+            self._solve_stacked = _Timed(sot._solver.solve_stacked)
             self._step = _Timed(dev._step)
             sot._solver.solve = self._solve
+            sot._solver.solve_stacked = self._solve_stacked
             dev._step = self._step
 
     def run(self, k: int) -> None:
@@ -348,12 +354,12 @@ class SotpyRunner:
         try:
             for i in range(self.done, stop):
                 if breakdown:
-                    self._solve.total = self._step.total = 0.0
+                    self._solve.total = self._solve_stacked.total = self._step.total = 0.0
                 t0 = perf()
                 increment(DT)
                 times[i] = perf() - t0
                 if breakdown:
-                    self.solve[i] = self._solve.total
+                    self.solve[i] = self._solve.total + self._solve_stacked.total
                     self.integration[i] = self._step.total
                 method = sot.lastResult.method
                 methods[method] = methods.get(method, 0) + 1
@@ -367,6 +373,7 @@ class SotpyRunner:
         dev, sot = self.controller.device, self.controller.sot
         if self.breakdown:
             del sot._solver.solve
+            del sot._solver.solve_stacked
             del dev._step
         n = self.done
         ep = Episode(

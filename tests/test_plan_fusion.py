@@ -649,3 +649,105 @@ def test_gain_change_after_a_plan_run_is_seen_in_the_same_tick():
     np.testing.assert_allclose(controls[ON][0], controls[OFF][0], atol=1e-12)
     assert not np.allclose(controls[OFF][0], controls[OFF][1])  # the gain matters
     np.testing.assert_allclose(controls[ON][1], controls[OFF][1], atol=1e-12)
+
+
+# -- SOT level: rows written in place into the solver's buffers ---------------------------
+def count_solves(sot) -> Counter:
+    """Count the SOT solver's calls with the levels (``solve``) and on the rows the SOT
+    wrote in place (``solve_stacked``)."""
+    calls: Counter = Counter()
+    solver = sot._solver
+    for name in ("solve", "solve_stacked"):
+        real = getattr(solver, name)
+
+        def spy(*args, _real=real, _name=name, **kwargs):
+            calls[_name] += 1
+            return _real(*args, **kwargs)
+
+        setattr(solver, name, spy)
+    return calls
+
+
+@needs_kernels
+def test_rows_are_written_in_place_from_the_second_tick(bench_sot, scenes):
+    """The first tick of a plan goes through the levels (it learns their sizes), the
+    next ones write every row straight into the solver's buffers, with the control of
+    the unfused graph at every tick. A stack edit recompiles the plan: once through the
+    levels again."""
+    on, off = build_pair(bench_sot, scenes("talos"))
+    calls = count_solves(on.sot)
+    tick_both(on, off, 10)
+    assert calls == {"solve": 1, "solve_stacked": 9}
+    # limits, feet and CoM, wrist position, posture
+    assert on.sot._inPlace[1] == on.sot._solver._structure.sizes == (32, 14, 3, 32)
+    for c in (on, off):
+        c.sot.remove(c.tasks[-1])  # the posture
+    tick_both(on, off, 5)
+    assert calls == {"solve": 2, "solve_stacked": 13}
+    assert on.sot._solver._structure.sizes == (32, 14, 3)
+
+
+@needs_kernels
+def test_a_task_changing_size_goes_through_the_levels_once(bench_sot, scenes):
+    on, off = build_pair(bench_sot, scenes("talos"))
+    calls = count_solves(on.sot)
+    tick_both(on, off, 5)
+    for p in (ON, OFF):
+        entity(f"feature{p}rh").selec.value = "111111"  # the wrist: 3 rows to 6
+    tick_both(on, off, 5)
+    assert calls == {"solve": 2, "solve_stacked": 8}
+    assert on.sot._solver._structure.sizes == (32, 14, 6, 32)
+
+
+@needs_kernels
+def test_new_limits_are_seen_in_the_same_tick(bench_sot, scenes):
+    """Velocity limits replaced by a new array while running: the in-place rows were
+    computed from the previous ones, so that tick goes through the levels (which
+    recompute them); the control respects the new limits from that tick on."""
+    on, off = build_pair(bench_sot, scenes("talos"))
+    vmax = np.asarray(on.sot.upperVl.value)
+    for c in (on, off):
+        c.sot.upperVl.value = vmax  # a constant from now on (the plan recompiles)
+    calls = count_solves(on.sot)
+    tick_both(on, off, 5)
+    assert calls == {"solve": 1, "solve_stacked": 4}
+    iv = on.sot._iv
+    slow = 0.02 * vmax
+    for c in (on, off):
+        c.sot.upperVl.value = slow  # a new array, the same plan
+    tick_both(on, off, 5)
+    assert calls == {"solve": 2, "solve_stacked": 8}
+    x = on.sot.lastResult.x
+    assert np.all(np.abs(x[iv]) <= slow[iv] + 1e-9)
+    assert np.abs(x[iv]).max() > 0.9 * slow[iv].min()  # the new limits are active
+
+
+@needs_kernels
+def test_limit_rows_kernel_is_the_limit_level_bit_for_bit():
+    """The joint-limit level computed in place (``_rowkernels.limit_bounds``) against
+    ``SOT._limitLevel``: random configurations inside and beyond the limits, joints
+    without a velocity limit or a position limit, a NaN configuration entry."""
+    r = load_robot("talos", prefix="limitsX_")
+    sot = SOT("limitsX_sot", r.dynamic)
+    rng = np.random.default_rng(7)
+    lower = np.asarray(r.dynamic.lowerJl.value).copy()
+    upper = np.asarray(r.dynamic.upperJl.value).copy()
+    vmax = np.asarray(r.dynamic.upperVl.value).copy()
+    lower[8], upper[9], vmax[10] = -np.inf, np.inf, np.inf
+    for trial in range(20):
+        q = pin.randomConfiguration(
+            r.model, r.model.lowerPositionLimit - 0.3, r.model.upperPositionLimit + 0.3
+        )
+        if trial == 0:
+            q[12] = np.nan
+        dt = float(rng.uniform(1e-4, 1e-2))
+        A, lo, hi = sot._limitLevel(q, lower, upper, vmax, dt)
+        cache = sot._limits
+        m = A.shape[0]
+        lo2, hi2 = np.full(m + 3, 7.0), np.full(m + 3, 7.0)
+        rk.limit_bounds(q, cache[3], cache[4], cache[5], cache[6], dt, lo2, hi2, 2)
+        np.testing.assert_array_equal(lo2[2 : m + 2], lo)
+        np.testing.assert_array_equal(hi2[2 : m + 2], hi)
+        assert lo2[0] == lo2[1] == lo2[-1] == 7.0  # nothing written outside its rows
+        if trial == 0:
+            assert np.isnan(lo).any()

@@ -308,13 +308,21 @@ def test_active_joint_limits_solved_without_qp_on_talos(talos):
     sot.push(posture.task)
     plug(sot.control, dev.control)
     captured = {}
-    solve = sot._solver.solve
+    solver = sot._solver
+    solve, solve_stacked = solver.solve, solver.solve_stacked
 
     def spy(levels, damping=None):
         captured["levels"] = [tuple(np.array(a) for a in lv) for lv in levels]
         return solve(levels, damping)
 
-    sot._solver.solve = spy
+    def spy_stacked(damping=None, *, equality=False):  # the rows the SOT wrote in place
+        st = solver._structure
+        captured["levels"] = [
+            (st.An[sl].copy(), st.lo[sl].copy(), st.up[sl].copy()) for sl in st.slices
+        ]
+        return solve_stacked(damping, equality=equality)
+
+    solver.solve, solver.solve_stacked = spy, spy_stacked
     methods = []
     for _ in range(40):
         dev.increment(0.005)

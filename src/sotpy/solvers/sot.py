@@ -91,6 +91,7 @@ class SOT(Entity):
                 f"SOT({name}): expected a Dynamic entity (with a Pinocchio model), got {dynamic!r}"
             )
         self.nv = int(model.nv)
+        self._qShape = (int(model.nq),)
         self._stack: list[TaskAbstract] = []
         self._jointLimits = True
         self._solver = HierarchySolver()
@@ -100,6 +101,9 @@ class SOT(Entity):
         self._taskDamping: dict[str, float] = {}
         self._rowsA = np.empty((64, self.nv))  # the fused tasks' rows (see _fusion)
         self._rowsB = np.empty(64)
+        # (fused plan, level sizes) of the last tick solved through _fusedLevels: the
+        # next ticks of that plan write in place into the solver's buffers
+        self._inPlace: tuple[Any, tuple[int, ...]] | None = None
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
         for j in range(1, model.njoints):
@@ -320,7 +324,10 @@ class SOT(Entity):
             return np.zeros(self.nv)
         # one number when every level has the same damping (the usual undamped stack):
         # the solver then skips its per-level parsing
-        result = self._solver.solve(levels, damping=lams if any(lams) else 0.0)
+        return self._accept(self._solver.solve(levels, damping=lams if any(lams) else 0.0))
+
+    def _accept(self, result: Any) -> np.ndarray:
+        """Keep ``result`` as ``lastResult``, warn about an infeasible hard level."""
         self.lastResult = result
         hard = self._jointLimits or self._stack[0].isInequality
         if hard and not result.feasible:
@@ -334,7 +341,7 @@ class SOT(Entity):
                     SotpyWarning,
                     stacklevel=3,
                 )
-        else:
+        elif self._warned:
             self._warned = False
         return result.x
 
@@ -369,8 +376,14 @@ class SOT(Entity):
     def _solveFused(
         self, plan: list[tuple[TaskAbstract, Any, int]], head: int, *values: Any
     ) -> np.ndarray:
+        known = self._inPlace
         while True:
             try:
+                if known is not None and known[0] is plan:
+                    x = self._solveInPlace(plan, head, values, known[1])
+                    if x is not None:
+                        return x
+                    known = None  # sizes changed, or something to report: the levels
                 levels, lams = self._fusedLevels(plan, head, values)
                 break
             except BufferFull:
@@ -385,8 +398,85 @@ class SOT(Entity):
                 self.setTaskFusion(False)
                 return x
         if levels is None:  # a writer declined: the task signals, with their checks
+            self._inPlace = None
             return self._solve(tuple(s.value for s in self.control._deps))
-        return self._finish(levels, lams)
+        x = self._finish(levels, lams)
+        self._inPlace = (plan, tuple(len(level[0]) for level in levels))
+        return x
+
+    def _solveInPlace(
+        self,
+        plan: list[tuple[TaskAbstract, Any, int]],
+        head: int,
+        values: tuple[Any, ...],
+        sizes: tuple[int, ...],
+    ) -> np.ndarray | None:
+        """:meth:`_fusedLevels` and the solve with every row written straight into the
+        solver's stacked buffers (:meth:`HierarchySolver.stacked`), for the level sizes
+        of the previous tick. None (nothing kept) when a size differs or when anything
+        is to be reported: the caller then goes through :meth:`_fusedLevels`, whose
+        checks and the task signals say what is wrong."""
+        damping = values[0]
+        if type(damping) is not float or not 0.0 <= damping < math.inf:
+            return None
+        solver = self._solver
+        A, lo, up, starts = solver.stacked(sizes)
+        ndarray = np.ndarray
+        lams: list[float] = []
+        general = False
+        k = 0
+        if self._jointLimits:  # the rows of _limitLevel, computed in place
+            q, lower, upper, vmax, dt = values[1:6]
+            cache = self._limits
+            if (
+                cache is None
+                or cache[0] is not lower
+                or cache[1] is not upper
+                or cache[2] is not vmax
+                or cache[8].shape[0] != starts[1]
+                or type(q) is not ndarray
+                or q.shape != self._qShape
+                or type(dt) is not float
+                or not dt > 0.0
+            ):
+                return None
+            A[: starts[1]] = cache[8]
+            _rowkernels.limit_bounds(q, cache[3], cache[4], cache[5], cache[6], dt, lo, up, 0)
+            lams.append(0.0)
+            general = True
+            k = 1
+        overrides = self._taskDamping
+        nv = self.nv
+        o = head
+        for task, write, n in plan:
+            s, e = starts[k], starts[k + 1]
+            if write is None:
+                J = values[o]
+                if type(J) is not ndarray or J.shape != (e - s, nv):
+                    return None
+                A[s:e] = J
+                bounds = values[o + 1 : o + 3] if task.isInequality else values[o + 1 : o + 2]
+                try:
+                    lo[s:e] = bounds[0]
+                    up[s:e] = bounds[-1]
+                except (TypeError, ValueError):
+                    return None
+                general = general or task.isInequality
+            else:
+                try:
+                    if write(values, o, A, lo, s, 0.0) != e - s:
+                        return None
+                except BufferFull:
+                    return None
+                up[s:e] = lo[s:e]
+            lams.append(overrides.get(task.name, damping) if overrides else damping)
+            o += n
+            k += 1
+        try:
+            result = solver.solve_stacked(lams if any(lams) else 0.0, equality=not general)
+        except SotpyError:
+            return None
+        return self._accept(result)
 
     def _fusedLevels(
         self, plan: list[tuple[TaskAbstract, Any, int]], head: int, values: tuple[Any, ...]

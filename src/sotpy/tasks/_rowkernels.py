@@ -140,11 +140,34 @@ def _posture_rows(q, qdes, iq, iv, A, b, r, gain):  # pragma: no cover - compile
         b[r + i] = -gain * (q[iq[i]] - qdes[iq[i]])
 
 
+def _limit_bounds(q, iq, ql, qu, vm, dt, lo, up, r):  # pragma: no cover - compiled
+    """The SOT's joint-limit level (bounds on ``qdot_j`` for the joints at ``iq``):
+    ``lo[r + i] = clip((ql_i - q_j) / dt, -vm_i, vm_i)`` and ``up[r + i]`` the same with
+    ``qu_i``, in the operations and order of :meth:`SOT._limitLevel` (a NaN stays NaN,
+    as with ``np.maximum``/``np.minimum``). ``q`` must hold every ``iq``."""
+    for i in range(iq.shape[0]):
+        qi = q[iq[i]]
+        v = vm[i]
+        a = (ql[i] - qi) / dt
+        b = (qu[i] - qi) / dt
+        if a < -v:
+            a = -v
+        if a > v:
+            a = v
+        if b < -v:
+            b = -v
+        if b > v:
+            b = v
+        lo[r + i] = a
+        up[r + i] = b
+
+
 _log3_c = kernel(_log3)
 _jlog3_c = kernel(_jlog3)
 pose_rows = kernel(_pose_rows)
 generic_rows = kernel(_generic_rows)
 posture_rows = kernel(_posture_rows)
+limit_bounds = kernel(_limit_bounds)
 _warm: list[bool] = []
 
 
@@ -174,17 +197,21 @@ def warm_up() -> None:
 
     M = pin.SE3.Identity()
     n = 2
-    A, b = np.zeros((6, n)), np.zeros(6)
+    b = np.zeros(6)
     Jq = np.zeros((6, n))
     rows = np.arange(6, dtype=np.int64)
-    for R, p in ((M.rotation, M.translation), (np.eye(3), np.zeros(3))):
-        pose_rows(R, p, R, p, Jq, rows, A, b, 0, 1.0)
     s, J = np.zeros(3), np.zeros((3, n))
-    generic_rows(s, s, J, rows[:3], A, b, 0, 1.0)
-    generic_rows(s, s[:0], J, rows[:3], A, b, 0, 1.0)
-    posture_rows(s, s, rows[:1], rows[:1], A, b, 0, 1.0)
+    # rows into a C-order buffer (the SOT's own) or into the m x n view of the solver's
+    # stacked [A | -ref] (HierarchySolver.stacked)
+    for A in (np.zeros((6, n)), np.zeros((6, n + 1))[:, :n]):
+        for R, p in ((M.rotation, M.translation), (np.eye(3), np.zeros(3))):
+            pose_rows(R, p, R, p, Jq, rows, A, b, 0, 1.0)
+        generic_rows(s, s, J, rows[:3], A, b, 0, 1.0)
+        generic_rows(s, s[:0], J, rows[:3], A, b, 0, 1.0)
+        posture_rows(s, s, rows[:1], rows[:1], A, b, 0, 1.0)
     log3(np.eye(3))
     jlog3(np.eye(3))
-    for k in (pose_rows, generic_rows, posture_rows, _log3_c, _jlog3_c):
+    limit_bounds(s, rows[:1], s, s, s, 1.0, b, b, 0)
+    for k in (pose_rows, generic_rows, posture_rows, limit_bounds, _log3_c, _jlog3_c):
         k.disable_compile()
     _warm.append(True)
