@@ -594,3 +594,28 @@ def test_increment_order_and_ticks(panda):
         np.testing.assert_array_equal(entry[2], states[k])  # the state at t, not t + 1
     np.testing.assert_allclose(states[3], q0 + 3 * DT * u, atol=1e-15)
     assert dev.getTimeStep() == DT
+
+
+def test_compiled_step_checks_are_their_numpy_twins():
+    """The step's per-tick checks (compiled with numba) against the NumPy expressions
+    they replace: entries below, above, at the bounds, NaN, infinite, infinite bounds."""
+    from sotpy.dynamics import device as D
+
+    rng = np.random.default_rng(3)
+    specials = [np.nan, np.inf, -np.inf, 1.0, -1.0]
+    for trial in range(300):
+        n = int(rng.integers(1, 12))
+        lo = rng.uniform(-1.0, 0.0, n)
+        hi = rng.uniform(0.0, 1.0, n)
+        lo[rng.random(n) < 0.2] = -np.inf
+        hi[rng.random(n) < 0.2] = np.inf
+        x = rng.uniform(-1.2, 1.2, n) * (trial % 3 != 0)  # a third: all zero, inside
+        k = int(rng.integers(0, n))
+        if trial % 4 == 1:
+            x[k] = specials[trial % len(specials)]
+        if trial % 5 == 2:
+            x[k] = lo[k]  # at the bound: inside
+        assert D._inside_c(x, lo, hi) == D._inside_np(x, lo, hi)
+        assert D._finite_c(x) == D._finite_np(x)
+    assert D._inside_c(np.array([np.nan]), np.zeros(1), np.ones(1))  # as the comparisons
+    assert not D._finite_c(np.array([0.0, np.inf]))
