@@ -315,8 +315,9 @@ class SotpyRunner:
     """Runs a :class:`SotpyController` tick by tick, in chunks (see :func:`interleave`).
 
     One tick is ``device.increment(DT)``, timed. With ``breakdown``, the SOT solver's
-    ``solve`` and ``solve_stacked`` and the device's integration step (private attributes, wrapped on these
-    instances only, until :meth:`finish`) are timed too (about 0.3 us per call)."""
+    ``solve`` and ``solve_stacked`` and the device's integration step (private
+    attributes, wrapped on these instances only, until :meth:`finish`) are timed too
+    (about 0.3 us per call)."""
 
     def __init__(
         self,

@@ -599,7 +599,7 @@ def test_increment_order_and_ticks(panda):
 def test_compiled_step_checks_are_their_numpy_twins():
     """The step's per-tick checks (compiled with numba) against the NumPy expressions
     they replace: entries below, above, at the bounds, NaN, infinite, infinite bounds."""
-    from sotpy.dynamics import device as D
+    from sotpy.dynamics import device as dev
 
     rng = np.random.default_rng(3)
     specials = [np.nan, np.inf, -np.inf, 1.0, -1.0]
@@ -615,7 +615,7 @@ def test_compiled_step_checks_are_their_numpy_twins():
             x[k] = specials[trial % len(specials)]
         if trial % 5 == 2:
             x[k] = lo[k]  # at the bound: inside
-        assert D._inside_c(x, lo, hi) == D._inside_np(x, lo, hi)
-        assert D._finite_c(x) == D._finite_np(x)
-    assert D._inside_c(np.array([np.nan]), np.zeros(1), np.ones(1))  # as the comparisons
-    assert not D._finite_c(np.array([0.0, np.inf]))
+        assert dev._inside_c(x, lo, hi) == dev._inside_np(x, lo, hi)
+        assert dev._finite_c(x) == dev._finite_np(x)
+    assert dev._inside_c(np.array([np.nan]), np.zeros(1), np.ones(1))  # as the comparisons
+    assert not dev._finite_c(np.array([0.0, np.inf]))

@@ -363,17 +363,17 @@ def test_a_point_outside_the_box_goes_on_with_its_bounds_fixed(seed, free_calls)
 
 
 # ------------------------------------------------------------ posture-shaped last level
-def posture_stack(rng, n_base, n_joints, selected, tight=0.5):
+def posture_stack(rng, n_base, n_joints, selected, tight=0.5, upper=None):
     """An SOT-like stack: joint limits on the joints (the first ``n_base`` variables,
-    a free flyer, unbounded), upper levels of ``n_base + 5`` and 3 rows met inside the
-    box, and a posture on the joints ``selected`` (rows of the identity, in a shuffled
-    order) whose target pulls some joints onto their limits."""
+    a free flyer, unbounded), upper levels of ``upper`` rows (default ``n_base + 5``
+    and 3) met inside the box, and a posture on the joints ``selected`` (rows of the
+    identity, in a shuffled order) whose target pulls some joints onto their limits."""
     n = n_base + n_joints
     half = rng.uniform(0.2, 0.8, n_joints)
     box = (np.hstack([np.zeros((n_joints, n_base)), np.eye(n_joints)]), -half, half)
     inside = np.concatenate([rng.standard_normal(n_base), rng.uniform(-0.3, 0.3, n_joints) * half])
     levels = [box]
-    for m in (n_base + 5, 3):
+    for m in upper or (n_base + 5, 3):
         A = rng.standard_normal((m, n))
         b = A @ inside
         levels.append((A, b, b))
@@ -405,16 +405,29 @@ def kernel_inputs(levels, at_lo, at_hi):
     return st.A, int(st.starts[1]), int(st.starts[st.last]), W, vals, F, scratch
 
 
-@pytest.mark.parametrize("seed", range(10))
-def test_posture_split_gives_the_general_solve(seed):
+SHAPES = {
+    # free flyer and joints; some joints without a posture row (in N with the base)
+    "humanoid": (6, None, False),
+    "humanoid, posture on some joints": (6, None, True),
+    # the upper rows only fix the free flyer (one foot): M is empty, x_P = c
+    "one foot": (6, (6,), False),
+    # a fixed base: N is empty, Q_N = I
+    "fixed base": (0, (5, 3), False),
+}
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("shape", list(SHAPES))
+def test_posture_split_gives_the_general_solve(seed, shape):
     """The posture-shaped solve (free flyer ``N`` from a QR of its upper columns, the
     joints by a minimum-norm correction) against the general null-space solve on the
     same kernel inputs: the same point and the same upper multipliers, for random
     guesses of the fixed joints."""
     rng = np.random.default_rng(5100 + seed)
-    n_base, n_joints = 6, int(rng.integers(14, 30))
-    selected = np.arange(n_joints) if seed % 2 else rng.permutation(n_joints)[: n_joints - 2]
-    levels = posture_stack(rng, n_base, n_joints, selected)
+    n_base, upper, some = SHAPES[shape]
+    n_joints = int(rng.integers(14, 30))
+    selected = rng.permutation(n_joints)[: n_joints - 2] if some else np.arange(n_joints)
+    levels = posture_stack(rng, n_base, n_joints, selected, upper=upper)
     n = n_base + n_joints
     at_lo = np.zeros(n, dtype=bool)
     at_hi = np.zeros(n, dtype=bool)
@@ -462,15 +475,17 @@ def test_posture_columns_recognises_only_rows_of_the_identity():
         assert len(_boxkkt._posture_columns(B, 2)) == 0, spoil
 
 
-@pytest.mark.parametrize("seed", range(8))
-def test_posture_stack_is_answered_by_the_kernel(seed, statuses):
-    """SOT-shaped stacks (joint limits, a free flyer, a posture on all or some joints):
-    every answer is the reference cascade's and the NumPy path's, ranks included, and
-    the compiled call proves it."""
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("shape", list(SHAPES))
+def test_posture_stack_is_answered_by_the_kernel(seed, shape, statuses):
+    """SOT-shaped stacks (joint limits, a free flyer or a fixed base, a posture on all
+    or some joints): every answer is the reference cascade's and the NumPy path's,
+    ranks included, and the compiled call proves it."""
     rng = np.random.default_rng(5200 + seed)
+    n_base, upper, some = SHAPES[shape]
     n_joints = int(rng.integers(12, 32))
-    selected = np.arange(n_joints) if seed < 4 else np.arange(3, n_joints)  # 3 left out
-    levels = posture_stack(rng, 6, n_joints, selected)
+    selected = np.arange(3, n_joints) if some else np.arange(n_joints)  # 3 left out
+    levels = posture_stack(rng, n_base, n_joints, selected, upper=upper)
     x_ref, optimal = cascade_hierarchy(levels)
     solver = HierarchySolver()
     numpy_path = HierarchySolver(jit=False)
@@ -482,9 +497,8 @@ def test_posture_stack_is_answered_by_the_kernel(seed, statuses):
     np.testing.assert_array_equal(res.ranks, other.ranks)
     assert res.method == other.method == "active-set"
     assert statuses[_boxkkt.OK] >= 1, statuses
-    held = np.isclose(np.abs(res.x[6:]), levels[0][2], rtol=0, atol=1e-12)
-    if seed < 4:
-        assert held.any()  # the posture pulled joints onto their limits
+    held = np.isclose(np.abs(res.x[n_base:]), levels[0][2], rtol=0, atol=1e-12)
+    assert held.any()  # the posture pulled joints onto their limits
 
 
 def test_posture_split_refuses_a_free_flyer_the_upper_levels_do_not_see():
@@ -531,3 +545,27 @@ def test_posture_split_refuses_dependent_upper_rows():
         A, s1, mu_, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
     )
     np.testing.assert_array_equal(x, 1.0)  # nothing written
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_one_foot_and_a_reachable_posture_is_the_square_solve(seed, statuses):
+    """One 6-row level on the free flyer, a posture on every joint inside its limits:
+    as many rows as variables, every level met, nothing at a bound. The kernel's
+    posture split gives the only point (the joints at their targets, the free flyer
+    from the foot rows): the cascade's answer and the NumPy path's."""
+    rng = np.random.default_rng(5500 + seed)
+    n_joints = int(rng.integers(12, 32))
+    levels = posture_stack(rng, 6, n_joints, np.arange(n_joints), tight=4.0, upper=(6,))
+    P, target, _ = levels[-1]
+    assert np.all(np.abs(target) < levels[0][2][P.argmax(axis=1) - 6])  # inside the box
+    x_ref, optimal = cascade_hierarchy(levels)
+    solver = HierarchySolver()
+    for _ in range(2):
+        res = solver.solve(levels)
+        assert_same(levels, res, x_ref, optimal)
+    other = HierarchySolver(jit=False).solve(levels)
+    np.testing.assert_allclose(res.x, other.x, atol=1e-10 * (1 + np.abs(other.x).max()))
+    np.testing.assert_array_equal(res.ranks, other.ranks)
+    assert res.method == other.method == "shortcut"
+    np.testing.assert_allclose(P @ res.x, target, rtol=0, atol=1e-13)
+    assert statuses[_boxkkt.OK] == 2 and statuses[_boxkkt.REFUSED] == 0

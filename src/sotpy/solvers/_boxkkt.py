@@ -42,8 +42,11 @@ the flops, by :func:`_posture_solve`:
     R_N x_N = d_1 - S x_P,\quad \mu_U = -Q_N \begin{bmatrix} 0 \\ \nu \end{bmatrix}
 
 (``M M^T`` through the QR ``M^T = Q_M R_M``: ``x_P = c + Q_M R_M^{-T} (e - M c)``).
-``U_N`` of full column rank is ``L Q_2`` of full column rank, and ``M`` of full row rank
-is ``U`` of full row rank; the split answers when ``rcond(R_N)^2 >= RCOND_MIN`` and
+``N`` may be empty (a fixed base: ``Q_N = I``) and so may ``M`` (the upper rows only
+fix ``x_N``, one foot: ``x_P = c``). The split also gives the point when every level
+is met with as many rows as free variables and nothing fixed (then that point is the
+only one and no multiplier is needed). ``U_N`` of full column rank is ``L Q_2`` of full
+column rank, and ``M`` of full row rank is ``U`` of full row rank; the split answers when ``rcond(R_N)^2 >= RCOND_MIN`` and
 ``rcond(R_M) >= RCOND_MIN``, the same pair of conditions, and else leaves the iteration
 to the general solve (so the call refuses no shape it answered before). For Talos (17
 upper rows, 6 free-flyer and 31 free joint variables) that is two QR of 17 x 6 and
@@ -140,8 +143,11 @@ if ENABLED:  # pragma: no branch - the environment decides
     ):  # pragma: no cover - compiled
         """The last level a posture (see :func:`_posture_columns`): the solve and the
         upper rows' multipliers of the module doc by the split of the free variables
-        into ``P`` (a posture row each) and ``N`` (none). ``False`` (nothing usable
-        written) when the split does not apply or is ill-conditioned."""
+        into ``P`` (a posture row each) and ``N`` (none; may be empty, then ``Q_N =
+        I``). ``M`` may be empty (the upper rows only fix ``x_N``: ``x_P = c``, no
+        multiplier). ``False`` (nothing written) when the split does not apply (more
+        ``N`` variables than upper rows, more ``M`` rows than ``P`` variables) or is
+        ill-conditioned."""
         n = A.shape[1] - 1
         w = W.shape[0]
         nf = F.shape[0]
@@ -151,7 +157,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 nN += 1
         nP = nf - nN
         mM = mu_ - nN
-        if nN == 0 or mM <= 0 or mM > nP:
+        if mM < 0 or mM > nP:
             return False
         N = np.empty(nN, dtype=np.int64)
         P = np.empty(nP, dtype=np.int64)
@@ -177,54 +183,59 @@ if ENABLED:  # pragma: no branch - the environment decides
                 UN[r, i] = A[row, N[i]]
             for i in range(nP):
                 UP[r, i] = A[row, P[i]]
-        tauN = np.empty(nN)
-        if _geqrf(UN, tauN, work, iw) != 0:
-            return False
-        rc = _rcond_upper(UN, nN, work, iwork, iw, ch)
-        if not rc * rc >= rcond_min:
-            return False
-        _ormqr(_L, _T, UN, nN, tauN, UP, work, iw, ch)  # [U_P | d] <- Q_N^T [U_P | d]
-        # M^T (Fortran) from the rows of Q_N^T U_P below R_N; t = e - M c
-        Mt = np.empty((mM, nP)).T
-        t = np.empty(mM)
+        tauN = np.empty(max(nN, 1))
+        if nN > 0:
+            if _geqrf(UN, tauN, work, iw) != 0:
+                return False
+            rc = _rcond_upper(UN, nN, work, iwork, iw, ch)
+            if not rc * rc >= rcond_min:
+                return False
+            _ormqr(_L, _T, UN, nN, tauN, UP, work, iw, ch)  # [U_P | d] <- Q_N^T [U_P | d]
         c = np.empty(nP)
         for i in range(nP):
             c[i] = -A[row_of[P[i]], n]
-        for r in range(mM):
-            acc = UP[nN + r, nP]
-            for i in range(nP):
-                v = UP[nN + r, i]
-                Mt[i, r] = v
-                acc -= v * c[i]
-            t[r] = acc
-        tauM = np.empty(mM)
-        if _geqrf(Mt, tauM, work, iw) != 0:
-            return False
-        if not _rcond_upper(Mt, mM, work, iwork, iw, ch) >= rcond_min:
-            return False
-        _trtrs_upper(Mt, mM, _T, t, iw, ch)  # R_M^T t' = t
-        z = np.zeros((1, nP)).T
-        z[:mM, 0] = t
-        _ormqr(_L, _N, Mt, mM, tauM, z, work, iw, ch)  # x_P - c = Q_M [t'; 0] = M^T nu
+        t = np.zeros(max(mM, 1))
+        z = np.zeros((1, nP)).T  # x_P - c = M^T nu
+        if mM > 0:
+            # M^T (Fortran) from the rows of Q_N^T U_P below R_N; t = e - M c
+            Mt = np.empty((mM, nP)).T
+            for r in range(mM):
+                acc = UP[nN + r, nP]
+                for i in range(nP):
+                    v = UP[nN + r, i]
+                    Mt[i, r] = v
+                    acc -= v * c[i]
+                t[r] = acc
+            tauM = np.empty(mM)
+            if _geqrf(Mt, tauM, work, iw) != 0:
+                return False
+            if not _rcond_upper(Mt, mM, work, iwork, iw, ch) >= rcond_min:
+                return False
+            _trtrs_upper(Mt, mM, _T, t, iw, ch)  # R_M^T t' = t
+            z[:mM, 0] = t[:mM]
+            _ormqr(_L, _N, Mt, mM, tauM, z, work, iw, ch)  # Q_M [t'; 0]
+            _trtrs_upper(Mt, mM, _N, t, iw, ch)  # R_M nu = t'
         for i in range(nP):
             x_aug[P[i]] = c[i] + z[i, 0]
         # x_N from R_N x_N = (Q_N^T d)_N - (Q_N^T U_P)_N x_P
-        xN = np.empty(nN)
-        for r in range(nN):
-            acc = UP[r, nP]
-            for i in range(nP):
-                acc -= UP[r, i] * x_aug[P[i]]
-            xN[r] = acc
-        _trtrs_upper(UN, nN, _N, xN, iw, ch)
-        for i in range(nN):
-            x_aug[N[i]] = xN[i]
+        if nN > 0:
+            xN = np.empty(nN)
+            for r in range(nN):
+                acc = UP[r, nP]
+                for i in range(nP):
+                    acc -= UP[r, i] * x_aug[P[i]]
+                xN[r] = acc
+            _trtrs_upper(UN, nN, _N, xN, iw, ch)
+            for i in range(nN):
+                x_aug[N[i]] = xN[i]
         for i in range(w):
             x_aug[W[i]] = vals[i]
-        # mu_U = -Q_N [0; nu], R_M nu = t'
-        _trtrs_upper(Mt, mM, _N, t, iw, ch)
+        # mu_U = -Q_N [0; nu]
         h = np.zeros((1, mu_)).T
-        h[nN:, 0] = t
-        _ormqr(_L, _N, UN, nN, tauN, h, work, iw, ch)
+        for r in range(mM):
+            h[nN + r, 0] = t[r]
+        if nN > 0 and mM > 0:
+            _ormqr(_L, _N, UN, nN, tauN, h, work, iw, ch)
         for r in range(mu_):
             muU[r] = -h[r, 0]
         return True
@@ -407,12 +418,16 @@ if ENABLED:  # pragma: no branch - the environment decides
             muU = np.zeros(max(mu_, 1))
             g = np.empty(n)
             posture = False
-            if not minnorm and row_of.shape[0] > 0 and mu_ > 0:
+            # the posture split: for the least-squares last level, or when every level
+            # is met and nothing is fixed with as many rows as variables (the point is
+            # then the only one; no multiplier is needed)
+            mp = split - s1
+            if row_of.shape[0] > 0 and mp > 0 and (not minnorm or (w == 0 and m - s1 == nf)):
                 posture = _posture_solve(
-                    A, s1, mu_, row_of, W, vals, F, x_aug, muU, rcond_min, work, iwork, iw, ch
+                    A, s1, mp, row_of, W, vals, F, x_aug, muU, rcond_min, work, iwork, iw, ch
                 )
             if posture:
-                _gradient(A, split, False, x_aug, g)
+                _gradient(A, split, minnorm, x_aug, g)
             elif not _general_solve(
                 A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
                 rcond_min, work, iwork, iw, ch,
