@@ -46,12 +46,12 @@ the flops, by :func:`_posture_solve`:
 fix ``x_N``, one foot: ``x_P = c``). The split also gives the point when every level
 is met with as many rows as free variables and nothing fixed (then that point is the
 only one and no multiplier is needed). ``U_N`` of full column rank is ``L Q_2`` of full
-column rank, and ``M`` of full row rank is ``U`` of full row rank; the split answers when ``rcond(R_N)^2 >= RCOND_MIN`` and
-``rcond(R_M) >= RCOND_MIN``, the same pair of conditions, and else leaves the iteration
-to the general solve (so the call refuses no shape it answered before). For Talos (17
-upper rows, 6 free-flyer and 31 free joint variables) that is two QR of 17 x 6 and
-31 x 11 and one ``Q_N^T`` applied to 17 x 32, against the general solve's QR of 37 x 17
-and ``L Q`` of 32 x 37.
+column rank, and ``M`` of full row rank is ``U`` of full row rank; the split answers
+when ``rcond(R_N)^2 >= RCOND_MIN`` and ``rcond(R_M) >= RCOND_MIN``, the same pair of
+conditions, and else leaves the iteration to the general solve (so the call refuses no
+shape it answered before). For Talos (17 upper rows, 6 free-flyer and 31 free joint
+variables) that is two QR of 17 x 6 and 31 x 11 and one ``Q_N^T`` applied to 17 x 32,
+against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37.
 
 The multipliers: with ``g`` the gradient of the last objective at ``x`` (``L^T (L x -
 c)``, or ``x`` for the minimum norm), ``U_F^T \mu_U = -g_F`` gives ``\mu_U = -R^{-1}

@@ -367,7 +367,6 @@ class HierarchySolver:
         sizes = tuple(int(m) for m in sizes)
         if any(m < 0 for m in sizes):
             raise SolverError(f"HierarchySolver.stacked: negative level size in {sizes}")
-        st = self._structure
         if st is None or st.sizes != sizes or st.A.shape[1] != n + 1:
             st = self._new_structure(sizes, n)
         return st.An, st.lo, st.up, st.starts

@@ -417,7 +417,7 @@ class SOT(Entity):
         is to be reported: the caller then goes through :meth:`_fusedLevels`, whose
         checks and the task signals say what is wrong."""
         damping = values[0]
-        if type(damping) is not float or not 0.0 <= damping < math.inf:
+        if not isinstance(damping, float) or not 0.0 <= damping < math.inf:
             return None
         solver = self._solver
         A, lo, up, starts = solver.stacked(sizes)
@@ -436,7 +436,7 @@ class SOT(Entity):
                 or cache[8].shape[0] != starts[1]
                 or type(q) is not ndarray
                 or q.shape != self._qShape
-                or type(dt) is not float
+                or not isinstance(dt, float)
                 or not dt > 0.0
             ):
                 return None
