@@ -405,6 +405,20 @@ def kernel_inputs(levels, at_lo, at_hi):
     return st.A, int(st.starts[1]), int(st.starts[st.last]), W, vals, F, scratch
 
 
+def posture_split(levels, at_lo, at_hi):
+    """The kernel's posture split on ``levels`` with the guess ``at_lo | at_hi``:
+    ``(answered, x_aug, mu_U, inputs)``, ``x_aug`` starting as ones (to see what is
+    written), ``inputs`` those of :func:`kernel_inputs`."""
+    inputs = kernel_inputs(levels, at_lo, at_hi)
+    A, s1, split, W, vals, F, (work, iwork, iw, ch) = inputs
+    row_of = _boxkkt._posture_columns(A, split)
+    x, mu = np.ones(A.shape[1]), np.zeros(split - s1)
+    ok = _boxkkt._posture_solve(
+        A, s1, split - s1, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
+    )
+    return ok, x, mu, inputs
+
+
 SHAPES = {
     # free flyer and joints; some joints without a posture row (in N with the base)
     "humanoid": (6, None, False),
@@ -434,15 +448,11 @@ def test_posture_split_gives_the_general_solve(seed, shape):
     fixed = n_base + rng.choice(n_joints, size=int(rng.integers(0, 5)), replace=False)
     at_lo[fixed[::2]] = True
     at_hi[fixed[1::2]] = True
-    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, at_lo, at_hi)
-    mu_ = split - s1
-    row_of = _boxkkt._posture_columns(A, split)
-    assert len(row_of) == n
-    x_p, mu_p = np.ones(n + 1), np.zeros(mu_)
-    ok = _boxkkt._posture_solve(
-        A, s1, mu_, row_of, W, vals, F, x_p, mu_p, 1e-9, work, iwork, iw, ch
-    )
+    ok, x_p, mu_p, inputs = posture_split(levels, at_lo, at_hi)
     assert ok
+    A, s1, split, W, vals, F, (work, iwork, iw, ch) = inputs
+    mu_ = split - s1
+    assert len(_boxkkt._posture_columns(A, split)) == n  # recognised as a posture
     x_g, mu_g, g = np.ones(n + 1), np.zeros(mu_), np.empty(n)
     ml = A.shape[0] - split
     assert _boxkkt._general_solve(
@@ -513,15 +523,8 @@ def test_posture_split_refuses_a_free_flyer_the_upper_levels_do_not_see():
         A = A.copy()
         A[:, 2] = 0.0
         levels[k] = (A, b, b)
-    n = 20
-    none = np.zeros(n, dtype=bool)
-    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, none, none)
-    mu_ = split - s1
-    row_of = _boxkkt._posture_columns(A, split)
-    x, mu = np.ones(n + 1), np.zeros(mu_)
-    assert not _boxkkt._posture_solve(
-        A, s1, mu_, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
-    )
+    none = np.zeros(20, dtype=bool)
+    assert not posture_split(levels, none, none)[0]
     x_ref, optimal = cascade_hierarchy(levels)
     assert_same(levels, HierarchySolver().solve(levels), x_ref, optimal)
 
@@ -535,15 +538,9 @@ def test_posture_split_refuses_dependent_upper_rows():
     A = np.vstack([A, A[0]])
     b = np.append(b, b[0])
     levels[1] = (A, b, b)
-    n = 20
-    none = np.zeros(n, dtype=bool)
-    A, s1, split, W, vals, F, (work, iwork, iw, ch) = kernel_inputs(levels, none, none)
-    mu_ = split - s1
-    row_of = _boxkkt._posture_columns(A, split)
-    x, mu = np.ones(n + 1), np.zeros(mu_)
-    assert not _boxkkt._posture_solve(
-        A, s1, mu_, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
-    )
+    none = np.zeros(20, dtype=bool)
+    answered, x, _, _ = posture_split(levels, none, none)
+    assert not answered
     np.testing.assert_array_equal(x, 1.0)  # nothing written
 
 
