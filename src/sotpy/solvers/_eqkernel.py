@@ -19,6 +19,9 @@ import numpy as np
 
 from .._jit import ENABLED, report_compile
 
+#: :func:`equality_all`'s status
+SOLVED, NONFINITE_MATRIX, NONFINITE_RESULT = 0, 1, 2
+
 equality_stack = None
 equality_all = None
 kkt = None
@@ -93,16 +96,16 @@ if ENABLED:  # pragma: no branch - the environment decides
         return iw[4]
 
     @_nb.njit(cache=True, nogil=True)
-    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
-        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
-        in the columns of the Fortran array ``refl``."""
+    def _ormqr_ld(side, trans, rows, cols, k, refl, tau, c, ldc, work, iw, ch):  # pragma: no cover
+        """:func:`_ormqr` on the leading ``rows x cols`` block of ``c``, whose leading
+        dimension is ``ldc`` (a block of rows of a Fortran array)."""
         ch[0] = side
         ch[1] = trans
-        iw[0] = c.shape[0]
-        iw[1] = c.shape[1]
+        iw[0] = rows
+        iw[1] = cols
         iw[2] = k
         iw[3] = max(refl.shape[0], 1)
-        iw[5] = max(c.shape[0], 1)
+        iw[5] = max(ldc, 1)
         iw[6] = work.shape[0]
         _dormqr(
             ch[0:].ctypes, ch[1:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes,
@@ -110,6 +113,13 @@ if ENABLED:  # pragma: no branch - the environment decides
             work.ctypes, iw[6:].ctypes, iw[7:].ctypes,
         )  # fmt: skip
         return iw[7]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
+        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
+        in the columns of the Fortran array ``refl``."""
+        return _ormqr_ld(side, trans, c.shape[0], c.shape[1], k, refl, tau, c, c.shape[0],
+                         work, iw, ch)  # fmt: skip
 
     @_nb.njit(cache=True, nogil=True)
     def _trtrs_upper(a, n, trans, b, iw, ch):  # pragma: no cover
@@ -206,8 +216,9 @@ if ENABLED:  # pragma: no branch - the environment decides
         n = W.shape[0] - 1
         nf = n - c0
         # [A Z | A x - b]; before any step (Z = I, x = 0) the rows themselves, copied:
-        # LAPACK overwrites views of maug below
-        maug = rows.copy() if c0 == 0 else np.ascontiguousarray((rows @ W)[:, c0:])
+        # LAPACK overwrites views of maug below. The product takes the columns c0: of W
+        # only, through a view numba knows to be Fortran-contiguous (one BLAS call)
+        maug = rows.copy() if c0 == 0 else rows @ W.T[c0:].T
         thr = rank_tol * scale
         if not need and not full_only and m > nf and lam == 0.0:
             # least squares from a pivoted QR of M itself
@@ -253,7 +264,18 @@ if ENABLED:  # pragma: no branch - the environment decides
                     L[m + j, j] = lam
             _gels(L, rhs, work, iw, ch)
             z = rhs[:r].copy()
-        if need:
+        if need and c0 == 0:
+            # W = I (no step yet): Z Q = Q, of which only the null-space columns
+            # Q[:, r:] = Q [0; I] are used from now on: the columns r: of W, which
+            # hold [0; I] (a left product on n - r columns instead of a right one on n)
+            _ormqr_ld(_L, _N, n, n - r, kmax, refl, tau[:kmax], W[:, r:], n + 1, work, iw, ch)
+            v = np.zeros((1, nf)).T  # Fortran
+            for i in range(r):
+                v[i, 0] = z[i]
+            _ormqr(_L, _N, refl, kmax, tau[:kmax], v, work, iw, ch)
+            for i in range(n):  # x = 0 - Q [z; 0]
+                W[i, n] = -v[i, 0]
+        elif need:
             zq = W[:, c0:n]
             _ormqr(_R, _N, refl, kmax, tau[:kmax], zq, work, iw, ch)
             W[:, n] -= z[:r] @ W.T[c0 : c0 + r]
@@ -270,17 +292,24 @@ if ENABLED:  # pragma: no branch - the environment decides
         """The whole equality path: the Frobenius norm of each level (its rank scale),
         the recursion, the residual ``||A_k x - b_k||`` of each level and the next plan
         of blocks (runs of undamped full-rank levels, as ``hierarchy._plan_blocks``).
-        Returns ``(ok, x, ranks, fro, res, plan)``; ``ok`` False (nothing solved) when a
-        matrix entry is not finite."""
+        Returns ``(status, x, ranks, fro, res, plan, xnorm)``: ``status``
+        :data:`SOLVED`, :data:`NONFINITE_MATRIX` (nothing solved) or
+        :data:`NONFINITE_RESULT` (``x`` or a residual overflowed); ``xnorm`` is
+        ``||x||_2``."""
         n = A.shape[1] - 1
         p = starts.shape[0] - 1
         fro, finite = _level_norms(A, starts)
         if not finite:
-            return False, np.zeros(n), np.zeros(p, dtype=np.int64), fro, fro, blocks
+            return NONFINITE_MATRIX, np.zeros(n), np.zeros(p, dtype=np.int64), fro, fro, blocks, 0.0
         x, ranks = _equality_stack(A, starts, blocks, fro, lams, rank_tol, last)
         x_aug = np.ones(n + 1)
         x_aug[:n] = x
         res = _residuals(A, x_aug, starts, fro, fro, False)  # (bounds unused: equalities)
+        acc = 0.0
+        for i in range(n):
+            acc += x[i] * x[i]
+        xnorm = np.sqrt(acc)
+        status = SOLVED if np.isfinite(xnorm + res.sum()) else NONFINITE_RESULT
         plan = np.zeros((p, 2), dtype=np.int64)
         nb = 0
         run = -1
@@ -309,7 +338,7 @@ if ENABLED:  # pragma: no branch - the environment decides
             plan[nb, 0] = run
             plan[nb, 1] = p
             nb += 1
-        return True, x, ranks, fro, res, plan[:nb].copy()
+        return status, x, ranks, fro, res, plan[:nb].copy(), xnorm
 
     @_nb.njit(cache=True, nogil=True)
     def _kkt(upper, last, has_last, n, fixed, values):  # pragma: no cover - compiled

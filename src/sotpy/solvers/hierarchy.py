@@ -152,7 +152,9 @@ class HierarchyResult:
         "xnorm",
     )
 
-    def __init__(self, x, residuals, ranks, method, qp_levels, iterations, converged, fro, eps):
+    def __init__(
+        self, x, residuals, ranks, method, qp_levels, iterations, converged, fro, eps, xnorm=None
+    ):
         self.x = x
         self.residuals = residuals
         self.ranks = ranks
@@ -160,7 +162,7 @@ class HierarchyResult:
         self.qp_levels = qp_levels
         self.iterations = iterations
         self.converged = converged
-        self.xnorm = math.sqrt(float(x @ x))
+        self.xnorm = math.sqrt(float(x @ x)) if xnorm is None else xnorm
         self._fro = fro
         self._eps = eps
 
@@ -243,6 +245,7 @@ class _Structure:
         "up",
         "upin",
         "warm",
+        "zero_lams",
     )
 
 
@@ -417,6 +420,9 @@ class HierarchySolver:
         n = self.n
         parsed = []
         sizes_l = []
+        mats: list[np.ndarray] = []  # A, lower, upper of every level, for one copy each
+        los: list[np.ndarray] = []
+        ups: list[np.ndarray] = []
         general = False
         try:
             for k, level in enumerate(levels):
@@ -454,6 +460,9 @@ class HierarchySolver:
                     up = _as_vector(up, k, "upper", m)
                 parsed.append((A, lo, up))
                 sizes_l.append(m)
+                mats.append(A)
+                los.append(lo)
+                ups.append(lo if up is None else up)
         except TypeError as exc:
             raise SolverError(f"solve_hierarchy: levels must be a list of tuples ({exc})") from None
         if n is None:
@@ -462,20 +471,11 @@ class HierarchySolver:
         st = self._structure
         if st is None or st.sizes != sizes or st.A.shape[1] != n + 1:
             st = self._new_structure(sizes, n)
-        A_st, starts = st.A, st.starts
-        if general:
-            lo_st, up_st = st.lo, st.up
-            for k, (A, lo, up) in enumerate(parsed):
-                s, e = starts[k], starts[k + 1]
-                A_st[s:e, :n] = A
-                lo_st[s:e] = lo
-                up_st[s:e] = lo if up is None else up
-        else:
-            lo_st = st.lo
-            for k, (A, lo, _) in enumerate(parsed):
-                s, e = starts[k], starts[k + 1]
-                A_st[s:e, :n] = A
-                lo_st[s:e] = lo
+        if mats:  # one copy per buffer (the levels in order are its rows)
+            np.concatenate(mats, out=st.An)
+            np.concatenate(los, out=st.lo)
+            if general:
+                np.concatenate(ups, out=st.up)
         self._bookkeep(st, parsed, general)
         return st, parsed
 
@@ -571,6 +571,7 @@ class HierarchySolver:
         st.qps = {}
         st.warm = {}
         st.blocks = [(k, k + 1) for k in range(len(sizes)) if sizes[k] > 0]
+        st.zero_lams = np.zeros(len(sizes))  # the compiled path's dampings, undamped
         st.eq_full = None
         st.kkt_wait = 0
         self._structure = st
@@ -660,31 +661,33 @@ class HierarchySolver:
         matrix entry is not finite and ``check`` is off (the caller then takes the
         NumPy path, which reports it), or when the kernel refuses its arguments
         (compiled kernels are then off for this solver)."""
+        blocks = st.blocks  # the kernel's plan of the previous call, once there is one
+        if type(blocks) is not np.ndarray:
+            blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 2)
         try:
-            ok, x, ranks, fro, res, plan = _eqkernel.equality_all(
+            status, x, ranks, fro, res, plan, xnorm = _eqkernel.equality_all(
                 st.A,
                 st.starts64,
-                np.asarray(st.blocks, dtype=np.int64).reshape(-1, 2),
-                np.array(lams, dtype=np.float64),
+                blocks,
+                np.array(lams, dtype=np.float64) if any(lams) else st.zero_lams,
                 self.rank_tol,
                 st.last,
             )
         except TypeError as exc:  # types the kernel was not compiled for: NumPy
             self._stop_jit(exc)
             return None
-        if not ok:
+        if status == _eqkernel.NONFINITE_MATRIX:
             if self.check:
                 _raise_nonfinite_matrix(parsed)
             return None
-        self._fro = fro
-        st.blocks = plan
-        out = HierarchyResult(x, res, ranks, "equality", (), 0, True, fro, self.eps)
-        if not math.isfinite(out.xnorm + float(res.sum())):
+        if status != _eqkernel.SOLVED:
             _raise_nonfinite_matrix(parsed)
             raise SolverError(
                 "solve_hierarchy: the solution is not finite (overflow: is the stack scaled?)"
             )
-        return out
+        self._fro = fro
+        st.blocks = plan
+        return HierarchyResult(x, res, ranks, "equality", (), 0, True, fro, self.eps, xnorm)
 
     def _stop_jit(self, exc: Exception) -> None:
         self.jit = False
@@ -890,16 +893,17 @@ class HierarchySolver:
                 st.kkt_wait = _KKT_RETRY
             return None
         sizes = st.sizes
-        ranks = np.zeros(len(sizes), dtype=np.intp)
-        ranks[1:] = sizes[1:]
+        ranks = np.array(sizes, dtype=np.intp)
+        ranks[0] = 0
         if not minnorm:
             ranks[st.last] = nf - m_upper
         n = self.n
-        method = "active-set" if nf < n else "shortcut"
-        out = HierarchyResult(x_aug[:n], res, ranks, method, (), 0, True, self._fro, self.eps)
-        if not math.isfinite(out.xnorm + float(res.sum())):
+        x = x_aug[:n]
+        xnorm = math.sqrt(x @ x)
+        if not math.isfinite(xnorm + res.sum()):
             return None  # the NumPy path reports what is not finite
-        return out
+        method = "active-set" if nf < n else "shortcut"
+        return HierarchyResult(x, res, ranks, method, (), 0, True, self._fro, self.eps, xnorm)
 
     def _solve_box(
         self, st: _Structure, parsed, stepper: NullspaceStepper, box: BoxActiveSet
@@ -1593,6 +1597,8 @@ def _restore(stepper: NullspaceStepper, saved) -> None:
 
 def _dampings(damping, p: int) -> list[float]:
     """The damping of each of the ``p`` levels, from one number or one per level."""
+    if type(damping) is float and 0.0 <= damping < math.inf:  # the usual call
+        return [damping] * p
     if isinstance(damping, (int, float, np.integer, np.floating)):
         lam = float(damping)
         _check_damping(lam)
