@@ -19,16 +19,21 @@ QP_TOL = 1e-6
 
 @pytest.fixture
 def statuses(monkeypatch):
-    """Count the compiled box path's statuses (OK, REFUSED, UNDECIDED, NOT_CONVERGED)."""
-    counts = {s: 0 for s in range(4)}
-    real = _boxkkt.box_kkt
+    """Count the compiled box path's statuses (OK, REFUSED, UNDECIDED, NOT_CONVERGED;
+    LEFT: the lane's, after which the usual path calls box_kkt), over both of its
+    entries (box_kkt, and the lane that the call after an answered one takes)."""
+    counts = {s: 0 for s in range(5)}
 
-    def spy(*args):
-        out = real(*args)
-        counts[int(out[0])] += 1
-        return out
+    def spy_on(real):
+        def spy(*args):
+            out = real(*args)
+            counts[int(out[0])] += 1
+            return out
 
-    monkeypatch.setattr(_boxkkt, "box_kkt", spy)
+        return spy
+
+    for name in ("box_kkt", "lane"):
+        monkeypatch.setattr(_boxkkt, name, spy_on(getattr(_boxkkt, name)))
     return counts
 
 
@@ -389,7 +394,8 @@ def kernel_inputs(levels, at_lo, at_hi):
     """The compiled kernel's inputs for ``levels`` (as the solver stacks them) and the
     fixed/free split of the guess ``at_lo | at_hi``, with the scratch arrays."""
     solver = HierarchySolver()
-    st, _ = solver._prepare(levels)
+    st, parsed, general = solver._prepare(levels)
+    solver._bookkeep(st, parsed, general)
     box = solver._box(st)
     n = solver.n
     held = at_lo | at_hi

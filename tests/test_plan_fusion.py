@@ -688,6 +688,34 @@ def test_rows_are_written_in_place_from_the_second_tick(bench_sot, scenes):
 
 
 @needs_kernels
+def test_in_place_ticks_take_the_box_lane_with_the_same_control(bench_sot, scenes, monkeypatch):
+    """Once the compiled box path has answered a tick, the next in-place ticks are one
+    compiled call (the lane of ``_boxkkt``); the states equal, bit for bit, those of the
+    same graph whose solver never takes the lane."""
+    from sotpy.solvers import _boxkkt
+
+    statuses: Counter = Counter()
+    real = _boxkkt.lane
+
+    def spy(*args):
+        out = real(*args)
+        statuses[int(out[0])] += 1
+        return out
+
+    monkeypatch.setattr(_boxkkt, "lane", spy)
+    scene = scenes("talos")
+    on = bench_sot.build_sotpy_reach(scene, prefix=ON)
+    off = bench_sot.build_sotpy_reach(scene, prefix=OFF)
+    off.sot._solver._lane_solve = lambda st, damping: None
+    for _ in range(40):
+        on.device.increment(DT)
+        off.device.increment(DT)
+        assert np.array_equal(on.device.state.value, off.device.state.value)
+        assert np.array_equal(on.sot.lastResult.x, off.sot.lastResult.x)
+    assert statuses[_boxkkt.OK] >= 30, statuses
+
+
+@needs_kernels
 def test_a_task_changing_size_goes_through_the_levels_once(bench_sot, scenes):
     on, off = build_pair(bench_sot, scenes("talos"))
     calls = count_solves(on.sot)

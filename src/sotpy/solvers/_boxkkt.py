@@ -67,17 +67,29 @@ import numpy as np
 from .._jit import ENABLED
 
 box_kkt = None
+lane = None
 _compiled = None  # the kernel itself (box_kkt may be wrapped, e.g. by a test's spy)
 _warm: list[bool] = []
 
-#: :func:`box_kkt`'s statuses
-OK, REFUSED, UNDECIDED, NOT_CONVERGED = 0, 1, 2, 3
+#: :func:`box_kkt`'s statuses; :func:`lane` also answers ``LEFT`` (nothing decided)
+OK, REFUSED, UNDECIDED, NOT_CONVERGED, LEFT = 0, 1, 2, 3, 4
 
 
 if ENABLED:  # pragma: no branch - the environment decides
     import numba as _nb
 
-    from ._eqkernel import _L, _N, _R, _T, _external, _ormqr, _residuals, _trtrs_upper
+    from ._eqkernel import (
+        _L,
+        _N,
+        _R,
+        _T,
+        _bounds,
+        _box_update,
+        _external,
+        _ormqr,
+        _residuals,
+        _trtrs_upper,
+    )
 
     _dgeqrf = _external("dgeqrf", 8)
     _dtrcon = _external("dtrcon", 10)
@@ -473,7 +485,49 @@ if ENABLED:  # pragma: no branch - the environment decides
             return OK, x_aug, res, minnorm, nf, mu_, it
         return NOT_CONVERGED, x_aug, res, False, 0, 0, max_iter
 
+    @_nb.njit(cache=True, nogil=True)
+    def _lane(
+        A, lo, up, ref, rlo, rup, d, eqmask, starts, cols, coef, blo, bhi, at_lo, at_hi,
+        s1, split, eps, rcond_min, dual_tol, max_iter,
+    ):  # pragma: no cover - compiled  # fmt: skip
+        """The box path of a solve whose row classes and box structure are those of the
+        previous call, which this kernel answered: the bookkeeping
+        (:func:`._eqkernel._bounds`, the mask left as it is), the box
+        (:func:`._eqkernel._box_update`) and :func:`_box_kkt`, in one call.
+
+        Returns ``(status, x_aug, residuals, minnorm, nf, m_upper, iterations, fro,
+        xnorm)`` as :func:`_box_kkt` with the level norms and ``||x||``. Anything else
+        than a proven, finite answer is ``LEFT`` with the guess ``at_lo``, ``at_hi`` as
+        it came: a non-finite entry, a bound pair out of order, a row that changes
+        class, a box of another structure, a refusal. The caller then runs the usual
+        path, which does the same work again and reports what is wrong.
+        """
+        n = A.shape[1] - 1
+        x_aug = np.ones(n + 1)
+        res = np.zeros(starts.shape[0] - 1)
+        fro, finite, ok, changed = _bounds(A, lo, up, ref, rlo, rup, d, eqmask, starts, False)
+        if not finite or not ok or changed or cols.shape[0] != s1:
+            return LEFT, x_aug, res, False, 0, 0, 0, fro, 0.0
+        if not _box_update(A, s1, n, cols, coef, lo, up, blo, bhi, at_lo, at_hi):
+            return LEFT, x_aug, res, False, 0, 0, 0, fro, 0.0
+        lo0 = at_lo.copy()
+        hi0 = at_hi.copy()
+        status, x_aug, res, minnorm, nf, m_upper, its = _box_kkt(
+            A, s1, split, starts, rlo, rup, blo, bhi, at_lo, at_hi, eps, rcond_min, dual_tol,
+            max_iter,
+        )  # fmt: skip
+        acc = 0.0
+        for j in range(n):
+            acc += x_aug[j] * x_aug[j]
+        xnorm = np.sqrt(acc)
+        if status != OK or not np.isfinite(xnorm + res.sum()):
+            at_lo[:] = lo0
+            at_hi[:] = hi0
+            return LEFT, x_aug, res, False, 0, 0, 0, fro, 0.0
+        return OK, x_aug, res, minnorm, nf, m_upper, its, fro, xnorm
+
     box_kkt = _compiled = _box_kkt
+    lane = _lane
 
 
 def warm_up() -> None:
@@ -489,5 +543,13 @@ def warm_up() -> None:
         A, n, n, starts, z, z, -np.ones(n), np.ones(n), np.zeros(n, dtype=np.bool_),
         np.zeros(n, dtype=np.bool_), 1e-9, 1e-9, 1e-10, 4,
     )  # fmt: skip
+    m = 2 * n  # the buffers as HierarchySolver passes them (a box on every variable)
+    _lane(
+        A, -np.ones(m), np.ones(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
+        np.zeros(m, dtype=np.bool_), starts, np.arange(n), np.ones(n), np.zeros(n),
+        np.zeros(n), np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_), n, n,
+        1e-9, 1e-9, 1e-10, 4,
+    )  # fmt: skip
     _compiled.disable_compile()
+    _lane.disable_compile()
     _warm.append(True)

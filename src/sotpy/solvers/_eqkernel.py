@@ -485,6 +485,12 @@ if ENABLED:  # pragma: no branch - the environment decides
         the equality mask (``d == 0``) updated in place, and each level's Frobenius
         norm. Returns ``(fro, finite, bounds_ok, changed)``: the matrices finite, every
         ``d >= 0`` (no NaN), the mask changed."""
+        return _bounds(A, lo, up, ref, rlo, rup, d, eqmask, starts, True)
+
+    @_nb.njit(cache=True, nogil=True)
+    def _bounds(A, lo, up, ref, rlo, rup, d, eqmask, starts, commit):  # pragma: no cover
+        """:func:`_bounds_prepare`; the mask is written only with ``commit`` (else
+        ``changed`` says whether it would change)."""
         m = A.shape[0]
         n = A.shape[1] - 1
         ok = True
@@ -508,7 +514,8 @@ if ENABLED:  # pragma: no branch - the environment decides
                 ok = False
             e = di == 0.0
             if e != eqmask[i]:
-                eqmask[i] = e
+                if commit:
+                    eqmask[i] = e
                 changed = True
         fro, finite = _level_norms(A, starts)
         return fro, finite, ok, changed

@@ -62,7 +62,8 @@ Solution paths
   levels above the last can be met exactly; else level by level, a held row judged by
   its own level's residual or, when met, by the levels below). With only equality rows
   below the box (the SOT's usual tick) the whole iteration is one compiled call
-  (:mod:`._boxkkt`) when it can prove its answer;
+  (:mod:`._boxkkt`) when it can prove its answer, and the next call with the same row
+  classes adds the bookkeeping and the box to that call (the *lane*);
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
@@ -225,6 +226,7 @@ class _Structure:
         "in_level",
         "key",
         "kkt_wait",
+        "lane",
         "last",
         "lo",
         "lo_adj",
@@ -344,8 +346,8 @@ class HierarchySolver:
         reach). Raises :class:`SolverError` on malformed input, naming the level and
         row.
         """
-        st, parsed = self._prepare(levels)
-        return self._solve_prepared(st, parsed, damping)
+        st, parsed, general = self._prepare(levels)
+        return self._solve_copied(st, parsed, general, damping)
 
     def stacked(self, sizes: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
         """The solver's own stacked buffers, to write a stack into in place instead of
@@ -385,9 +387,46 @@ class HierarchySolver:
         st = self._structure
         if st is None:
             raise SolverError("HierarchySolver.solve_stacked: call stacked(sizes) first")
-        parsed = _StackedLevels(st, equality)
-        self._bookkeep(st, parsed, not equality)
+        return self._solve_copied(st, _StackedLevels(st, equality), not equality, damping)
+
+    def _solve_copied(self, st: _Structure, parsed, general: bool, damping) -> HierarchyResult:
+        """Once the levels are in the stacked buffers: the box lane when it applies
+        (:meth:`_lane_solve`), else the bookkeeping and the solve."""
+        if general and st.lane:
+            out = self._lane_solve(st, damping)
+            if out is not None:
+                return out
+        self._bookkeep(st, parsed, general)
         return self._solve_prepared(st, parsed, damping)
+
+    def _lane_solve(self, st: _Structure, damping) -> HierarchyResult | None:
+        """The call after one that the compiled box path answered, with the same row
+        classes: bookkeeping, box and solve in one compiled call
+        (:func:`._boxkkt.lane`), the same arithmetic as the usual path. None (nothing
+        changed) when the call is not of that kind or the kernel leaves it to the
+        usual path, which then also says what is wrong."""
+        lam = self.damping if damping is None else damping
+        if (
+            type(lam) is not float
+            or lam != 0.0
+            or not (self.jit and self.check and self.shortcut and self.active_set)
+            or st.kkt_wait > 0
+        ):
+            return None
+        box = st.box
+        try:
+            status, x_aug, res, minnorm, nf, m_upper, _its, fro, xnorm = _boxkkt.lane(
+                st.A, st.lo, st.up, st.ref, st.rlo, st.rup, st.d, st.eqmask, st.starts64,
+                box.cols, box.coef, box.lo, box.hi, box.at_lo, box.at_hi, st.starts[1],
+                st.starts[st.last], self.eps, RCOND_MIN, DUAL_TOL, _BOX_ITERATIONS,
+            )  # fmt: skip
+        except TypeError as exc:  # types the kernel was not compiled for: NumPy
+            self._stop_jit(exc)
+            return None
+        if status != _boxkkt.OK:
+            return None
+        self._fro = fro
+        return self._box_result(st, x_aug, res, minnorm, nf, m_upper, xnorm)
 
     def _solve_prepared(self, st: _Structure, parsed, damping) -> HierarchyResult:
         """:meth:`solve` once the levels are in the stacked buffers."""
@@ -416,7 +455,8 @@ class HierarchySolver:
     # ------------------------------------------------------------ input handling
     def _prepare(self, levels):
         """Copy the levels into the stacked buffers ``[A | -lower]``, ``upper``;
-        validate; classify rows."""
+        validate. Returns ``(structure, parsed levels, general)``: ``general`` when
+        some level has an ``upper`` of its own."""
         n = self.n
         parsed = []
         sizes_l = []
@@ -476,8 +516,7 @@ class HierarchySolver:
             np.concatenate(los, out=st.lo)
             if general:
                 np.concatenate(ups, out=st.up)
-        self._bookkeep(st, parsed, general)
-        return st, parsed
+        return st, parsed, general
 
     def _bookkeep(self, st: _Structure, parsed, general: bool) -> None:
         """Once ``A`` and the bounds are in the stacked buffers: the augmented column,
@@ -574,6 +613,7 @@ class HierarchySolver:
         st.zero_lams = np.zeros(len(sizes))  # the compiled path's dampings, undamped
         st.eq_full = None
         st.kkt_wait = 0
+        st.lane = False
         self._structure = st
         return st
 
@@ -587,6 +627,7 @@ class HierarchySolver:
         st.active = set()
         st.shortcut_ok = True
         st.box = None
+        st.lane = False
         st.box_blocks = None
         st.box_full = None
         mtot = st.A.shape[0]
@@ -892,18 +933,25 @@ class HierarchySolver:
                 # guess that fixes too many variables says little about the next calls)
                 st.kkt_wait = _KKT_RETRY
             return None
-        sizes = st.sizes
-        ranks = np.array(sizes, dtype=np.intp)
+        x = x_aug[: self.n]
+        xnorm = math.sqrt(x @ x)
+        if not math.isfinite(xnorm + res.sum()):
+            return None  # the NumPy path reports what is not finite
+        st.lane = box.cols is not None  # the next call with these row classes: one call
+        return self._box_result(st, x_aug, res, minnorm, nf, m_upper, xnorm)
+
+    def _box_result(self, st, x_aug, res, minnorm, nf, m_upper, xnorm) -> HierarchyResult:
+        """The result of the compiled box path: every level below the box met (its
+        rows' rank), but a least-squares last level (the free directions it fixed)."""
+        ranks = np.array(st.sizes, dtype=np.intp)
         ranks[0] = 0
         if not minnorm:
             ranks[st.last] = nf - m_upper
         n = self.n
-        x = x_aug[:n]
-        xnorm = math.sqrt(x @ x)
-        if not math.isfinite(xnorm + res.sum()):
-            return None  # the NumPy path reports what is not finite
         method = "active-set" if nf < n else "shortcut"
-        return HierarchyResult(x, res, ranks, method, (), 0, True, self._fro, self.eps, xnorm)
+        return HierarchyResult(
+            x_aug[:n], res, ranks, method, (), 0, True, self._fro, self.eps, xnorm
+        )
 
     def _solve_box(
         self, st: _Structure, parsed, stepper: NullspaceStepper, box: BoxActiveSet
