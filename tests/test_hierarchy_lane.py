@@ -66,6 +66,16 @@ def same_guess(a: HierarchySolver, b: HierarchySolver) -> None:
     assert np.array_equal(ba.at_hi, bb.at_hi)
 
 
+def warmed(seed: int, ticks: int):
+    """A pair of solvers (:func:`pair`) after the first three calls of a drifting
+    sequence (the lane is in use from the second), and the whole sequence."""
+    fast, slow = pair()
+    seq = list(drifting(seed, ticks=ticks))
+    for levels in seq[:3]:
+        same(fast.solve(levels), slow.solve(levels))
+    return fast, slow, seq
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_the_lane_gives_the_usual_answer_bit_for_bit(seed, lane_calls):
     fast, slow = pair()
@@ -95,10 +105,7 @@ def test_the_lane_through_the_stacked_buffers(lane_calls):
 def test_a_row_that_changes_class_goes_through_the_usual_path(lane_calls):
     """A box row whose bounds meet (lower == upper: an equality) is another row class:
     the lane leaves the call, the usual path reclassifies; the same answers."""
-    fast, slow = pair()
-    seq = list(drifting(5300, ticks=6))
-    for levels in seq[:3]:
-        same(fast.solve(levels), slow.solve(levels))
+    fast, slow, seq = warmed(5300, 6)
     key = fast._structure.key
     A0, lo, hi = seq[3][0]
     lo, hi = lo.copy(), hi.copy()
@@ -117,10 +124,7 @@ def test_a_row_that_changes_class_goes_through_the_usual_path(lane_calls):
 
 
 def test_a_box_of_another_structure_goes_through_the_usual_path(lane_calls):
-    fast, slow = pair()
-    seq = list(drifting(5400, ticks=5))
-    for levels in seq[:3]:
-        same(fast.solve(levels), slow.solve(levels))
+    fast, slow, seq = warmed(5400, 5)
     A0, lo, hi = seq[3][0]
     A0 = A0.copy()
     A0[4, 4] = 2.0  # the same pattern, another coefficient: 2 x_4 within [lo, hi]
@@ -139,10 +143,7 @@ def test_a_guess_the_lane_cannot_prove_is_left_as_it_came(wrong, lane_calls):
     variables held at a bound, more corrections than the kernel makes (it stops and
     the usual path goes on)."""
     for seed in range(6):
-        fast, slow = pair()
-        seq = list(drifting(5500 + seed, ticks=4))
-        for levels in seq[:3]:
-            same(fast.solve(levels), slow.solve(levels))
+        fast, slow, seq = warmed(5500 + seed, 4)
         box = fast._structure.box
         held = np.flatnonzero(box.at_lo | box.at_hi)
         free = np.flatnonzero(~(box.at_lo | box.at_hi))
@@ -180,10 +181,7 @@ def test_the_usual_path_starts_from_the_guess_the_lane_was_given(monkeypatch):
     monkeypatch.setattr(_boxkkt, "box_kkt", spy_on("box_kkt", _boxkkt.box_kkt, 8))
     left = 0
     for seed in range(6):
-        fast, _ = pair()
-        seq = list(drifting(5500 + seed, ticks=4))
-        for levels in seq[:3]:
-            fast.solve(levels)
+        fast, _, seq = warmed(5500 + seed, 4)
         box = fast._structure.box
         # wrong bounds to release, one per correction: more than the kernel makes
         box.at_hi[np.flatnonzero(~(box.at_lo | box.at_hi))[:6]] = True
@@ -199,10 +197,7 @@ def test_the_usual_path_starts_from_the_guess_the_lane_was_given(monkeypatch):
 
 @pytest.mark.parametrize("fault", ["nan", "order"])
 def test_bad_input_at_a_lane_call_raises_the_usual_error(fault, lane_calls):
-    fast, slow = pair()
-    seq = list(drifting(5600, ticks=4))
-    for levels in seq[:3]:
-        same(fast.solve(levels), slow.solve(levels))
+    fast, slow, seq = warmed(5600, 4)
     A, lo, up = seq[3][2]
     if fault == "nan":
         A = A.copy()
@@ -222,10 +217,7 @@ def test_bad_input_at_a_lane_call_raises_the_usual_error(fault, lane_calls):
 
 
 def test_a_damped_call_does_not_take_the_lane(lane_calls):
-    fast, slow = pair()
-    seq = list(drifting(5700, ticks=4))
-    for levels in seq[:3]:
-        same(fast.solve(levels), slow.solve(levels))
+    fast, slow, seq = warmed(5700, 4)
     before = len(lane_calls)
     for damping in (0.01, [0.0, 0.0, 0.0, 0.01]):
         same(fast.solve(seq[3], damping), slow.solve(seq[3], damping))
