@@ -17,19 +17,23 @@ from test_hierarchy_boxkkt import reach_like
 pytestmark = pytest.mark.skipif(_boxkkt.lane is None, reason="numba missing or SOTPY_JIT=0")
 
 
-@pytest.fixture
-def lane_calls(monkeypatch):
-    """The lane's statuses, in call order."""
+def statuses_of(monkeypatch, name: str) -> list[int]:
+    """The statuses of the kernel ``_boxkkt.<name>``, in call order."""
     calls: list[int] = []
-    real = _boxkkt.lane
+    real = getattr(_boxkkt, name)
 
     def spy(*args):
         out = real(*args)
         calls.append(int(out[0]))
         return out
 
-    monkeypatch.setattr(_boxkkt, "lane", spy)
+    monkeypatch.setattr(_boxkkt, name, spy)
     return calls
+
+
+@pytest.fixture
+def lane_calls(monkeypatch):
+    return statuses_of(monkeypatch, "lane")
 
 
 def pair(n: int | None = None) -> tuple[HierarchySolver, HierarchySolver]:
@@ -64,6 +68,17 @@ def same_guess(a: HierarchySolver, b: HierarchySolver) -> None:
     ba, bb = a._structure.box, b._structure.box
     assert np.array_equal(ba.at_lo, bb.at_lo)
     assert np.array_equal(ba.at_hi, bb.at_hi)
+
+
+def same_error(fast: HierarchySolver, slow: HierarchySolver, levels) -> str:
+    """Both solvers refuse ``levels`` with the same message; the message."""
+    messages = []
+    for solver in (fast, slow):
+        with pytest.raises(SolverError) as info:
+            solver.solve(levels)
+        messages.append(str(info.value))
+    assert messages[0] == messages[1]
+    return messages[0]
 
 
 def warmed(seed: int, ticks: int):
@@ -206,13 +221,7 @@ def test_bad_input_at_a_lane_call_raises_the_usual_error(fault, lane_calls):
         lo, up = lo.copy(), lo.copy()
         up[1] = lo[1] - 1.0  # lower > upper
     seq[3][2] = (A, lo, up)
-    messages = []
-    for solver in (fast, slow):
-        with pytest.raises(SolverError) as info:
-            solver.solve(seq[3])
-        messages.append(str(info.value))
-    assert messages[0] == messages[1]
-    assert "level 2, row 1" in messages[0]
+    assert "level 2, row 1" in same_error(fast, slow, seq[3])
     assert lane_calls[-1] == _boxkkt.LEFT
 
 
@@ -222,3 +231,92 @@ def test_a_damped_call_does_not_take_the_lane(lane_calls):
     for damping in (0.01, [0.0, 0.0, 0.0, 0.01]):
         same(fast.solve(seq[3], damping), slow.solve(seq[3], damping))
     assert len(lane_calls) == before
+
+
+# -- the free lane: no bound in the guess, levels below the box of any rank -------------
+@pytest.fixture
+def free_calls(monkeypatch):
+    return statuses_of(monkeypatch, "free_lane")
+
+
+def deficient(seed: int, ticks: int = 12, half: float = 1e4, drop: int = 10**9):
+    """A wide box, then levels below it that the compiled box call refuses: level 2
+    repeats a row of level 1 with another target (a conflict: rank deficient in the
+    null space of level 1); from call ``drop`` on, the last level repeats one of its
+    rows (its rank drops); the data drift from call to call."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    A1 = rng.standard_normal((4, n))
+    A2 = np.vstack([A1[:1], rng.standard_normal((2, n))])
+    A3 = rng.standard_normal((6, n))
+    b = [rng.standard_normal(4), rng.standard_normal(3), rng.standard_normal(6)]
+    for t in range(ticks):
+        s = 0.05 * np.sin(0.4 * t)
+        levels = [(np.eye(n), -half * np.ones(n), half * np.ones(n))]
+        for k, (A, bk) in enumerate(zip((A1, A2, A3), b, strict=True)):
+            A = A + s * np.ones_like(A)
+            if k == 2 and t >= drop:
+                A[5] = A[4]
+            target = bk + s
+            levels.append((A, target, target))
+        yield levels
+
+
+def warmed_free(seed: int, ticks: int, drop: int = 10**9):
+    """:func:`warmed` for :func:`deficient` sequences, both lanes of ``slow`` off."""
+    fast, slow = pair()
+    slow._free_lane_solve = lambda st, damping: None
+    seq = list(deficient(seed, ticks, drop=drop))
+    for levels in seq[:3]:
+        same(fast.solve(levels), slow.solve(levels))
+    return fast, slow, seq
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_free_lane_gives_the_usual_answer_bit_for_bit(seed, free_calls):
+    """Also when a level's rank drops on the way: the plans the box path keeps for its
+    next calls (blocks of full-rank levels) follow, as on the usual path."""
+    fast, slow, seq = warmed_free(6100 + seed, 12, drop=7)
+    ranks = []
+    for levels in seq[3:]:
+        a = fast.solve(levels)
+        same(a, slow.solve(levels))
+        assert a.method == "shortcut"
+        assert fast._structure.box_blocks == slow._structure.box_blocks
+        assert fast._structure.box_full == slow._structure.box_full
+        ranks.append(a.ranks[3])
+    assert ranks[0] == 6 and ranks[-1] == 5
+    assert free_calls.count(_boxkkt.OK) >= 9, free_calls
+    x_ref, optimal = cascade_hierarchy(levels)
+    np.testing.assert_allclose(a.x, x_ref, atol=1e-6)
+    np.testing.assert_allclose(a.residuals, optimal, atol=1e-6)
+
+
+def test_a_point_out_of_the_box_goes_through_the_usual_path(free_calls):
+    """The box narrowed at one call: the recursion's point leaves it, the lane leaves
+    the call (the guess untouched), the usual path holds the bounds; the lane is off
+    until the free path answers again."""
+    fast, slow, seq = warmed_free(6200, 8)
+    A0, _, _ = seq[3][0]
+    half = 0.5 * np.abs(fast.solve(seq[2]).x) + 0.01  # the point of the last call is out
+    seq[3][0] = (A0, -half, half)
+    before = len(free_calls)
+    methods = []
+    for levels in seq[3:]:
+        a = fast.solve(levels)
+        same(a, slow.solve(levels))
+        same_guess(fast, slow)
+        methods.append(a.method)
+    assert free_calls[before] == _boxkkt.LEFT
+    assert methods[0] != "shortcut"  # bounds held
+    assert free_calls[-1] == _boxkkt.OK  # the wide box again, without a bound
+
+
+def test_bad_input_at_a_free_lane_call_raises_the_usual_error(free_calls):
+    fast, slow, seq = warmed_free(6300, 4)
+    A, lo, up = seq[3][3]
+    A = A.copy()
+    A[2, 5] = np.inf
+    seq[3][3] = (A, lo, up)
+    assert "level 3, row 2" in same_error(fast, slow, seq[3])
+    assert free_calls[-1] == _boxkkt.LEFT

@@ -28,7 +28,7 @@ from sotpy.dynamics import load_robot
 from sotpy.errors import CommandError, SotpyError, SotpyWarning, UnpluggedError
 from sotpy.graph import DOUBLE, VECTOR, Entity, Input, Output, Plan, compilePlan, plug, pool
 from sotpy.graph.tracer import Tracer
-from sotpy.solvers import SOT
+from sotpy.solvers import SOT, _boxkkt
 from sotpy.tasks import FeatureGeneric, FeaturePose, FeaturePosture, Task, TaskInequality
 from sotpy.tasks import _rowkernels as rk
 
@@ -687,22 +687,26 @@ def test_rows_are_written_in_place_from_the_second_tick(bench_sot, scenes):
     assert on.sot._solver._structure.sizes == (32, 14, 3)
 
 
-@needs_kernels
-def test_in_place_ticks_take_the_box_lane_with_the_same_control(bench_sot, scenes, monkeypatch):
-    """Once the compiled box path has answered a tick, the next in-place ticks are one
-    compiled call (the lane of ``_boxkkt``); the states equal, bit for bit, those of the
-    same graph whose solver never takes the lane."""
-    from sotpy.solvers import _boxkkt
-
+def lane_statuses(monkeypatch, name: str) -> Counter:
+    """Count the statuses of the solver's lane kernel ``_boxkkt.<name>``."""
     statuses: Counter = Counter()
-    real = _boxkkt.lane
+    real = getattr(_boxkkt, name)
 
     def spy(*args):
         out = real(*args)
         statuses[int(out[0])] += 1
         return out
 
-    monkeypatch.setattr(_boxkkt, "lane", spy)
+    monkeypatch.setattr(_boxkkt, name, spy)
+    return statuses
+
+
+@needs_kernels
+def test_in_place_ticks_take_the_box_lane_with_the_same_control(bench_sot, scenes, monkeypatch):
+    """Once the compiled box path has answered a tick, the next in-place ticks are one
+    compiled call (the lane of ``_boxkkt``); the states equal, bit for bit, those of the
+    same graph whose solver never takes the lane."""
+    statuses = lane_statuses(monkeypatch, "lane")
     scene = scenes("talos")
     on = bench_sot.build_sotpy_reach(scene, prefix=ON)
     off = bench_sot.build_sotpy_reach(scene, prefix=OFF)
@@ -713,6 +717,23 @@ def test_in_place_ticks_take_the_box_lane_with_the_same_control(bench_sot, scene
         assert np.array_equal(on.device.state.value, off.device.state.value)
         assert np.array_equal(on.sot.lastResult.x, off.sot.lastResult.x)
     assert statuses[_boxkkt.OK] >= 30, statuses
+
+
+@needs_kernels
+def test_ten_tasks_take_the_free_lane_with_the_same_control(bench_sot, monkeypatch):
+    """Ten tasks on Talos: levels below the joint limits of deficient rank (the compiled
+    box call refuses), no limit reached; after the first ticks each solve is the free
+    lane's one compiled call, the states bit for bit those of a solver without it."""
+    statuses = lane_statuses(monkeypatch, "free_lane")
+    on = bench_sot.build_sotpy_tasks(10, prefix=ON)
+    off = bench_sot.build_sotpy_tasks(10, prefix=OFF)
+    off.sot._solver._free_lane_solve = lambda st, damping: None
+    for _ in range(30):
+        on.device.increment(DT)
+        off.device.increment(DT)
+        assert np.array_equal(on.device.state.value, off.device.state.value)
+        assert on.sot.lastResult.method == off.sot.lastResult.method == "shortcut"
+    assert statuses[_boxkkt.OK] >= 25, statuses
 
 
 @needs_kernels

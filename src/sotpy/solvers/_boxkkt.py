@@ -68,10 +68,12 @@ from .._jit import ENABLED
 
 box_kkt = None
 lane = None
+free_lane = None
 _compiled = None  # the kernel itself (box_kkt may be wrapped, e.g. by a test's spy)
 _warm: list[bool] = []
 
-#: :func:`box_kkt`'s statuses; :func:`lane` also answers ``LEFT`` (nothing decided)
+#: :func:`box_kkt`'s statuses; :func:`lane` and :func:`free_lane` also answer ``LEFT``
+#: (nothing decided)
 OK, REFUSED, UNDECIDED, NOT_CONVERGED, LEFT = 0, 1, 2, 3, 4
 
 
@@ -85,6 +87,7 @@ if ENABLED:  # pragma: no branch - the environment decides
         _T,
         _bounds,
         _box_update,
+        _equality_stack,
         _external,
         _ormqr,
         _residuals,
@@ -497,10 +500,12 @@ if ENABLED:  # pragma: no branch - the environment decides
 
         Returns ``(status, x_aug, residuals, minnorm, nf, m_upper, iterations, fro,
         xnorm)`` as :func:`_box_kkt` with the level norms and ``||x||``. Anything else
-        than a proven, finite answer is ``LEFT`` with the guess ``at_lo``, ``at_hi`` as
-        it came: a non-finite entry, a bound pair out of order, a row that changes
-        class, a box of another structure, a refusal. The caller then runs the usual
-        path, which does the same work again and reports what is wrong.
+        than a proven, finite answer is ``LEFT``, the guess ``at_lo``, ``at_hi`` not
+        corrected (as the box reading leaves it, where the usual path starts): a
+        non-finite entry, a bound pair out of order, a row that changes class, a box of
+        another structure, a refusal, an undecided or unfinished correction. The caller
+        then runs the usual path, which does the same work again and reports what is
+        wrong.
         """
         n = A.shape[1] - 1
         x_aug = np.ones(n + 1)
@@ -526,8 +531,52 @@ if ENABLED:  # pragma: no branch - the environment decides
             return LEFT, x_aug, res, False, 0, 0, 0, fro, 0.0
         return OK, x_aug, res, minnorm, nf, m_upper, its, fro, xnorm
 
+    @_nb.njit(cache=True, nogil=True)
+    def _free_lane(
+        A, lo, up, ref, rlo, rup, d, eqmask, starts, cols, coef, blo, bhi, at_lo, at_hi,
+        s1, eq_starts, blocks, rank_tol, eps, last,
+    ):  # pragma: no cover - compiled  # fmt: skip
+        """The box path of a solve with the row classes and box structure of the
+        previous call, which the guess without a bound answered: the levels below the
+        box by the equality recursion (any rank, :func:`._eqkernel._equality_stack` on
+        the rows below the box, ``eq_starts`` their level starts, ``blocks`` the plan)
+        and the point inside the box. One call with the bookkeeping and the box
+        reading, as :func:`_lane`.
+
+        Returns ``(status, x_aug, residuals, ranks, fro, xnorm)``: ``OK``, or ``LEFT``
+        (nothing decided; the guess as the box reading leaves it): a non-finite entry, a
+        bound pair out of order, a row that changes class, a box of another structure,
+        a bound in the guess, a point out of the box, a non-finite point.
+        """
+        n = A.shape[1] - 1
+        p = starts.shape[0] - 1
+        x_aug = np.ones(n + 1)
+        res = np.zeros(p)
+        ranks = np.zeros(p, dtype=np.int64)
+        fro, finite, ok, changed = _bounds(A, lo, up, ref, rlo, rup, d, eqmask, starts, False)
+        if not finite or not ok or changed or cols.shape[0] != s1:
+            return LEFT, x_aug, res, ranks, fro, 0.0
+        if not _box_update(A, s1, n, cols, coef, lo, up, blo, bhi, at_lo, at_hi):
+            return LEFT, x_aug, res, ranks, fro, 0.0
+        for j in range(n):
+            if at_lo[j] or at_hi[j]:
+                return LEFT, x_aug, res, ranks, fro, 0.0
+        x, ranks = _equality_stack(A[s1:], eq_starts, blocks, fro, np.zeros(p), rank_tol, last)
+        acc = 0.0
+        for j in range(n):
+            if x[j] < blo[j] - eps or x[j] > bhi[j] + eps:
+                return LEFT, x_aug, res, ranks, fro, 0.0
+            x_aug[j] = x[j]
+            acc += x[j] * x[j]
+        res = _residuals(A, x_aug, starts, rlo, rup, True)
+        xnorm = np.sqrt(acc)
+        if not np.isfinite(xnorm + res.sum()):
+            return LEFT, x_aug, res, ranks, fro, 0.0
+        return OK, x_aug, res, ranks, fro, xnorm
+
     box_kkt = _compiled = _box_kkt
     lane = _lane
+    free_lane = _free_lane
 
 
 def warm_up() -> None:
@@ -550,6 +599,13 @@ def warm_up() -> None:
         np.zeros(n), np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_), n, n,
         1e-9, 1e-9, 1e-10, 4,
     )  # fmt: skip
-    _compiled.disable_compile()
-    _lane.disable_compile()
+    _free_lane(
+        A, -np.ones(m), np.ones(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
+        np.zeros(m, dtype=np.bool_), starts, np.arange(n), np.ones(n), np.zeros(n),
+        np.zeros(n), np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_), n,
+        np.array([0, 0, n], dtype=np.int64), np.array([[1, 2]], dtype=np.int64), 1e-9,
+        1e-9, 1,
+    )  # fmt: skip
+    for fn in (_compiled, _lane, _free_lane):
+        fn.disable_compile()
     _warm.append(True)

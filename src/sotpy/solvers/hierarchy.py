@@ -221,6 +221,7 @@ class _Structure:
         "eq_idx",
         "eq_starts",
         "eqmask",
+        "free_lane",
         "hi_adj",
         "in_idx",
         "in_level",
@@ -396,6 +397,10 @@ class HierarchySolver:
             out = self._lane_solve(st, damping)
             if out is not None:
                 return out
+        elif general and st.free_lane:
+            out = self._free_lane_solve(st, damping)
+            if out is not None:
+                return out
         self._bookkeep(st, parsed, general)
         return self._solve_prepared(st, parsed, damping)
 
@@ -405,28 +410,68 @@ class HierarchySolver:
         (:func:`._boxkkt.lane`), the same arithmetic as the usual path. None (nothing
         changed) when the call is not of that kind or the kernel leaves it to the
         usual path, which then also says what is wrong."""
-        lam = self.damping if damping is None else damping
-        if (
-            type(lam) is not float
-            or lam != 0.0
-            or not (self.jit and self.check and self.shortcut and self.active_set)
-            or st.kkt_wait > 0
-        ):
+        if st.kkt_wait > 0 or not self._lane_switches(damping):
             return None
+        out = self._run_lane(
+            _boxkkt.lane, st, st.starts[st.last], self.eps, RCOND_MIN, DUAL_TOL, _BOX_ITERATIONS
+        )
+        if out is None:
+            st.lane = False  # until the compiled box call answers again
+            return None
+        _, x_aug, res, minnorm, nf, m_upper, _its, fro, xnorm = out
+        self._fro = fro
+        return self._box_result(st, x_aug, res, minnorm, nf, m_upper, xnorm)
+
+    def _free_lane_solve(self, st: _Structure, damping) -> HierarchyResult | None:
+        """The call after one that the box path answered with no bound in its guess
+        (:meth:`_box_free_compiled`), while the compiled box call waits after a refusal
+        (rank-deficient levels below the box): bookkeeping, box, the equality recursion
+        below it and the point's check against the box in one compiled call
+        (:func:`._boxkkt.free_lane`), the same arithmetic as the usual path. None
+        (nothing changed) as :meth:`_lane_solve`."""
+        if st.kkt_wait == 0 or not self._lane_switches(damping):
+            return None
+        blocks = np.array(st.eq_blocks, dtype=np.int64).reshape(-1, 2)
+        out = self._run_lane(
+            _boxkkt.free_lane, st, st.eq_starts, blocks, self.rank_tol, self.eps, st.last
+        )
+        if out is None:
+            st.free_lane = False  # until the box path answers so again
+            return None
+        _, x_aug, res, ranks, fro, xnorm = out
+        self._fro = fro
+        ranks = ranks.astype(np.intp)
+        _remember_box_plan(st, ranks, [k for k, _ in st.eq_blocks])
+        n = self.n
+        return HierarchyResult(x_aug[:n], res, ranks, "shortcut", (), 0, True, fro, self.eps, xnorm)
+
+    def _run_lane(self, kernel, st: _Structure, *extra):
+        """A lane kernel's call on the stacked buffers and the box (the arguments both
+        lanes start with), then ``extra``: its outputs, or None when it leaves the call
+        or refuses its argument types (compiled kernels are then off for this
+        solver)."""
         box = st.box
         try:
-            status, x_aug, res, minnorm, nf, m_upper, _its, fro, xnorm = _boxkkt.lane(
+            out = kernel(
                 st.A, st.lo, st.up, st.ref, st.rlo, st.rup, st.d, st.eqmask, st.starts64,
-                box.cols, box.coef, box.lo, box.hi, box.at_lo, box.at_hi, st.starts[1],
-                st.starts[st.last], self.eps, RCOND_MIN, DUAL_TOL, _BOX_ITERATIONS,
+                box.cols, box.coef, box.lo, box.hi, box.at_lo, box.at_hi, st.starts[1], *extra,
             )  # fmt: skip
         except TypeError as exc:  # types the kernel was not compiled for: NumPy
             self._stop_jit(exc)
             return None
-        if status != _boxkkt.OK:
-            return None
-        self._fro = fro
-        return self._box_result(st, x_aug, res, minnorm, nf, m_upper, xnorm)
+        return out if out[0] == _boxkkt.OK else None
+
+    def _lane_switches(self, damping) -> bool:
+        """Whether a call may take a lane: undamped, with the default switches."""
+        lam = self.damping if damping is None else damping
+        return (
+            type(lam) is float
+            and lam == 0.0
+            and self.jit
+            and self.check
+            and self.shortcut
+            and self.active_set
+        )
 
     def _solve_prepared(self, st: _Structure, parsed, damping) -> HierarchyResult:
         """:meth:`solve` once the levels are in the stacked buffers."""
@@ -613,7 +658,7 @@ class HierarchySolver:
         st.zero_lams = np.zeros(len(sizes))  # the compiled path's dampings, undamped
         st.eq_full = None
         st.kkt_wait = 0
-        st.lane = False
+        st.lane = st.free_lane = False
         self._structure = st
         return st
 
@@ -627,7 +672,7 @@ class HierarchySolver:
         st.active = set()
         st.shortcut_ok = True
         st.box = None
-        st.lane = False
+        st.lane = st.free_lane = False
         st.box_blocks = None
         st.box_full = None
         mtot = st.A.shape[0]
@@ -968,6 +1013,7 @@ class HierarchySolver:
             W, values, s = box.fixed()
             G = np.flatnonzero(side) if lower else _NO_INDEX
             dual = None
+            free_path = False  # answered by _box_free_compiled
             if len(G):
                 verdict = self._rows_kkt(st, stepper, W, values, s, G)
                 if verdict is None:  # level by level, the held rows with each level
@@ -979,6 +1025,7 @@ class HierarchySolver:
                 ranks, release = verdict
             elif not len(W) and (ranks := self._box_free_compiled(st, stepper)) is not None:
                 release = -1  # no bound fixed: nothing to release
+                free_path = True
             else:
                 # a refusal on a corrected guess says little about the next calls
                 verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
@@ -1021,7 +1068,11 @@ class HierarchySolver:
                     side[i_lower:][above] = 1
                     continue
             method = "active-set" if len(W) or len(G) else "shortcut"
-            return self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
+            out = self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
+            # answered with no bound and no held row: the next such call in one
+            # compiled call (see _free_lane_solve)
+            st.free_lane = free_path and not lower
+            return out
         return None
 
     def _rows_kkt(
