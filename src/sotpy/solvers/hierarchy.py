@@ -392,8 +392,9 @@ class HierarchySolver:
         return self._solve_copied(st, _StackedLevels(st, equality), not equality, damping)
 
     def _solve_copied(self, st: _Structure, parsed, general: bool, damping) -> HierarchyResult:
-        """Once the levels are in the stacked buffers: the box lane when it applies
-        (:meth:`_lane_solve`), else the bookkeeping and the solve."""
+        """Once the levels are in the stacked buffers: a lane when one applies
+        (:meth:`_lane_solve`, :meth:`_free_lane_solve`), else the bookkeeping and the
+        solve."""
         if general and st.lane:
             out = self._lane_solve(st, damping)
             if out is not None:
@@ -1072,7 +1073,7 @@ class HierarchySolver:
             out = self._result(st, parsed, stepper.x_aug, ranks, method, (), 0, True)
             # answered with no bound and no held row: the next such call in one
             # compiled call (see _free_lane_solve)
-            st.free_lane = free_path and not lower
+            st.free_lane = free_path and not lower and box.cols is not None
             return out
         return None
 
