@@ -163,7 +163,8 @@ class NullspaceStepper:
         m = rows.shape[0]
         nf = self.nf
         if m == 0 or nf == 0:
-            return 0
+            # no direction left: the rows fix none (rank 0), short of full rank if any
+            return -1 if full_rank_only and m > 0 else 0
         # with Z = I and x = 0, [A Z | A x - b] is the rows themselves (read-only here)
         scratch = not self.identity or self.moved
         maug = self.reduced(rows) if scratch else rows
