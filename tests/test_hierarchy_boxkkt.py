@@ -303,6 +303,12 @@ def rank_deficient_below_box(rng, n, scale):
     ]
 
 
+def narrowed(levels, half: float):
+    """``levels`` with the box (level 0, on every variable) of half-width ``half``."""
+    n = levels[0][0].shape[1]
+    return [(levels[0][0], -half * np.ones(n), half * np.ones(n)), *levels[1:]]
+
+
 @pytest.fixture
 def free_calls(monkeypatch):
     """Count the answers of the compiled equality recursion with no bound fixed (on
@@ -361,8 +367,7 @@ def test_a_point_outside_the_box_goes_on_with_its_bounds_fixed(seed, free_calls)
     n = int(rng.integers(8, 16))
     wide = rank_deficient_below_box(rng, n, 100.0)
     x_wide, opt_wide = cascade_hierarchy(wide)
-    h = 0.8 * np.abs(x_wide).max()
-    tight = [(wide[0][0], -h * np.ones(n), h * np.ones(n)), *wide[1:]]
+    tight = narrowed(wide, 0.8 * np.abs(x_wide).max())
     x_tight, opt_tight = cascade_hierarchy(tight)
     solver = HierarchySolver()
     res = solver.solve(tight)

@@ -24,6 +24,7 @@ SOLVED, NONFINITE_MATRIX, NONFINITE_RESULT = 0, 1, 2
 
 equality_stack = None
 equality_all = None
+box_steps = None
 kkt = None
 residuals = None
 box_update = None
@@ -55,7 +56,9 @@ def warm_up() -> None:
     z = np.zeros(n)
     bounds_prepare(A, -np.ones(n), np.ones(n), z, z.copy(), z.copy(), z.copy(),
                    np.zeros(n, dtype=np.bool_), starts)  # fmt: skip
-    for fn in (equality_all, equality_stack, kkt, residuals, box_update, bounds_prepare):
+    box_steps(A, starts, blocks, np.ones(2), 1e-9, 1, np.zeros(1, dtype=np.int64), np.zeros(1),
+              np.ones(1), 1e-10)  # fmt: skip
+    for fn in (equality_all, equality_stack, kkt, residuals, box_update, bounds_prepare, box_steps):
         fn.disable_compile()
     _warm.append(True)
     report_compile("the hierarchical solver kernels", time.perf_counter() - start)
@@ -170,6 +173,7 @@ if ENABLED:  # pragma: no branch - the environment decides
         ch = np.zeros(3, dtype=np.uint8)
         jpvt = np.zeros(max(n, A.shape[0]), dtype=np.int32)
         tau = np.empty(max(n, 1))
+        nokeep = np.empty((0, 0)).T  # (R not wanted)
         for b in range(blocks.shape[0]):
             k0 = blocks[b, 0]
             k1 = blocks[b, 1]
@@ -186,7 +190,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 for k in range(k0 + 1, k1):
                     scale = min(scale, fro[k])
                 r = _step(A[s0:s1], W, c0, scale, rank_tol, 0.0, k1 - 1 != last, True,
-                          work, iw, ch, jpvt, tau)  # fmt: skip
+                          work, iw, ch, jpvt, tau, nokeep)  # fmt: skip
                 if r >= 0:
                     for k in range(k0, k1):
                         ranks[k] = starts[k + 1] - starts[k]
@@ -199,7 +203,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 if s1 == s0:
                     continue
                 r = _step(A[s0:s1], W, c0, fro[k], rank_tol, lams[k], k != last, False,
-                          work, iw, ch, jpvt, tau)  # fmt: skip
+                          work, iw, ch, jpvt, tau, nokeep)  # fmt: skip
                 ranks[k] = r
                 if k != last:
                     c0 += r
@@ -207,11 +211,13 @@ if ENABLED:  # pragma: no branch - the environment decides
 
     @_nb.njit(cache=True, nogil=True)
     def _step(
-        rows, W, c0, scale, rank_tol, lam, need, full_only, work, iw, ch, jpvt, tau
+        rows, W, c0, scale, rank_tol, lam, need, full_only, work, iw, ch, jpvt, tau, keep
     ):  # pragma: no cover
         """One step of :meth:`NullspaceStepper.step` on ``W`` (see there). Returns the
         rank, or -1 (nothing changed) when ``full_only`` and the rank is short. The
-        caller advances ``c0`` by the rank when ``need``."""
+        caller advances ``c0`` by the rank when ``need``. When the rank is the number
+        of rows ``m`` and ``keep`` has room, its leading ``m x m`` block receives the
+        pivoted QR's ``R`` (``jpvt[:m]`` its permutation), as ``last_qr`` does."""
         m = rows.shape[0]
         n = W.shape[0] - 1
         nf = n - c0
@@ -244,6 +250,10 @@ if ENABLED:  # pragma: no branch - the environment decides
             return -1
         if r == 0:
             return 0
+        if r == m and keep.shape[0] >= m:
+            for j in range(m):
+                for i in range(j + 1):
+                    keep[i, j] = qr[i, j]
         refl = qr[:, :kmax]
         ep = np.empty(m)
         for i in range(m):
@@ -339,6 +349,211 @@ if ENABLED:  # pragma: no branch - the environment decides
             plan[nb, 1] = p
             nb += 1
         return status, x, ranks, fro, res, plan[:nb].copy(), xnorm
+
+    @_nb.njit(cache=True, nogil=True)
+    def _box_steps(
+        A, starts, blocks, fro, rank_tol, last, fixed, values, s, dual_tol
+    ):  # pragma: no cover - compiled
+        """:meth:`HierarchySolver._box_steps` with its :class:`._boxset.DualCheck`, in
+        one call: from ``x_fixed = values`` (``Z`` the free unit vectors, as
+        :meth:`NullspaceStepper.fix`), the undamped recursion over the equality rows
+        ``A`` (levels ``starts``, ``blocks`` of levels stepped together when of full
+        row rank), each level judging the bounds still undecided (``s_i != 0``: the
+        direction into the box) and carrying their release directions into its null
+        space; then the minimum-norm criterion at the point (``DualCheck.finish``).
+
+        Returns ``(x, ranks, failed, worst)``: ``worst`` the position in ``fixed`` of
+        the bound to release when ``failed``."""
+        n = A.shape[1] - 1
+        p = starts.shape[0] - 1
+        ranks = np.zeros(p, dtype=np.int64)
+        k = fixed.shape[0]
+        W = np.zeros((n + 1, n + 1)).T  # Fortran; W = [[Z, x], [0, 1]]
+        held = np.zeros(n, dtype=np.bool_)
+        for i in range(k):
+            held[fixed[i]] = True
+            W[fixed[i], n] = values[i]
+        col = k
+        for j in range(n):
+            if not held[j]:
+                W[j, col] = 1.0
+                col += 1
+        W[n, n] = 1.0
+        c0 = k
+        # the undecided bounds: their positions in `fixed`, their release directions
+        u = 0
+        for i in range(k):
+            if s[i] != 0.0:
+                u += 1
+        idx = np.empty(u, dtype=np.int64)
+        D = np.zeros((n, u))
+        a = 0
+        for i in range(k):
+            if s[i] != 0.0:
+                idx[a] = i
+                D[fixed[i], a] = s[i]
+                a += 1
+        alive = np.ones(u, dtype=np.bool_)
+        state = np.array([0, -1], dtype=np.int64)  # failed, worst
+        m_all = A.shape[0]
+        work = np.empty(64 * (max(n, m_all) + 2))
+        iw = np.zeros(8, dtype=np.int32)
+        ch = np.zeros(3, dtype=np.uint8)
+        jpvt = np.zeros(max(n, m_all, 1), dtype=np.int32)
+        tau = np.empty(max(n, 1))
+        keep = np.zeros((max(m_all, 1), max(m_all, 1))).T
+        for b in range(blocks.shape[0]):
+            k0 = blocks[b, 0]
+            k1 = blocks[b, 1]
+            if k1 - k0 > 1:
+                judge = state[0] == 0 and alive.any()
+                s0, s1 = starts[k0], starts[k1]
+                scale = fro[k0]
+                for kk in range(k0 + 1, k1):
+                    scale = min(scale, fro[kk])
+                need = k1 - 1 != last
+                r = -1
+                if n - c0 > 0 and s1 > s0:
+                    r = _step(A[s0:s1], W, c0, scale, rank_tol, 0.0, need, True,
+                              work, iw, ch, jpvt, tau, keep)  # fmt: skip
+                if r >= 0:
+                    if judge:
+                        _dual_level(A[s0:s1], W, c0, r if need else -1, keep, jpvt, D,
+                                    alive, idx, state, dual_tol)  # fmt: skip
+                    for kk in range(k0, k1):
+                        ranks[kk] = starts[kk + 1] - starts[kk]
+                    if need:
+                        c0 += r
+                    continue
+            for kk in range(k0, k1):
+                s0, s1 = starts[kk], starts[kk + 1]
+                judge = state[0] == 0 and alive.any()
+                need = kk != last
+                r = 0
+                if n - c0 > 0 and s1 > s0:
+                    r = _step(A[s0:s1], W, c0, fro[kk], rank_tol, 0.0, need, False,
+                              work, iw, ch, jpvt, tau, keep)  # fmt: skip
+                ranks[kk] = r
+                if judge:
+                    _dual_level(A[s0:s1], W, c0, r if need else -1, keep, jpvt, D, alive,
+                                idx, state, dual_tol)  # fmt: skip
+                if need:
+                    c0 += r
+        x = W[:n, n].copy()
+        if state[0] == 0 and alive.any():  # DualCheck.finish: x^T d >= 0
+            xx = 0.0
+            for j in range(n):
+                xx += x[j] * x[j]
+            dd = 0.0
+            best = np.inf
+            at = -1
+            for a in range(u):
+                if not alive[a]:
+                    continue
+                acc = 0.0
+                for j in range(n):
+                    acc += x[j] * D[j, a]
+                    dd += D[j, a] * D[j, a]
+                if acc < best:
+                    best = acc
+                    at = a
+            if best < -dual_tol * (1.0 + np.sqrt(xx * dd)):
+                state[0] = 1
+                state[1] = idx[at]
+        return x, ranks, state[0] == 1, state[1]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _dual_level(
+        rows, W, c0, rank, keep, jpvt, D, alive, idx, state, dual_tol
+    ):  # pragma: no cover - compiled
+        """:meth:`._boxset.DualCheck.level` on the columns of ``D`` still ``alive``;
+        ``W[:n, c0:n]`` is the basis the level was solved in (its first ``rank``
+        columns ``Y = Z Q_r`` when ``rank`` is the number of rows, ``R`` then in
+        ``keep``); ``state`` = (failed, worst)."""
+        n = W.shape[0] - 1
+        m = rows.shape[0]
+        cols = np.flatnonzero(alive)
+        ua = cols.shape[0]
+        T = np.zeros((m, ua))
+        tt = 0.0
+        for i in range(m):
+            for a in range(ua):
+                acc = 0.0
+                for j in range(n):
+                    acc += rows[i, j] * D[j, cols[a]]
+                T[i, a] = acc
+                tt += acc * acc
+        if tt == 0.0:
+            return  # the level does not see these variables
+        res = np.empty(m)  # A x - b
+        rr = 0.0
+        for i in range(m):
+            acc = rows[i, n]
+            for j in range(n):
+                acc += rows[i, j] * W[j, n]
+            res[i] = acc
+            rr += acc * acc
+        tol = dual_tol * (1.0 + np.sqrt(rr * tt))
+        delta = np.zeros(ua)
+        for a in range(ua):
+            for i in range(m):
+                delta[a] += res[i] * T[i, a]
+        at = np.argmin(delta)
+        if delta[at] < -tol:
+            state[0] = 1
+            state[1] = idx[cols[at]]
+            return
+        keepc = np.zeros(ua, dtype=np.bool_)
+        for a in range(ua):
+            if delta[a] > tol:  # decided
+                alive[cols[a]] = False
+            else:
+                keepc[a] = True
+        left = np.flatnonzero(keepc)
+        if left.shape[0] == 0:
+            return
+        cols = cols[left]
+        T = np.ascontiguousarray(T[:, left])
+        ul = cols.shape[0]
+        if rank == m and rank > 0:
+            # R^T C = P^T T (forward substitution), then D -= Y C
+            C = np.empty((m, ul))
+            for i in range(m):
+                for a in range(ul):
+                    acc = T[jpvt[i] - 1, a]
+                    for h in range(i):
+                        acc -= keep[h, i] * C[h, a]
+                    C[i, a] = acc / keep[i, i]
+            for j in range(n):
+                for a in range(ul):
+                    acc = 0.0
+                    for i in range(rank):
+                        acc += W[j, c0 + i] * C[i, a]
+                    D[j, cols[a]] -= acc
+            return
+        nb = n - c0
+        if nb == 0:
+            for a in range(ul):
+                alive[cols[a]] = False  # nothing compensates: blocked
+            return
+        B = np.ascontiguousarray(W[:n, c0:n])
+        AB = np.ascontiguousarray(rows[:, :n]) @ B
+        C = np.linalg.lstsq(AB, T, rcond=2.220446049250313e-16 * max(m, nb))[0]
+        miss = T - AB @ C
+        for a in range(ul):
+            mn = 0.0
+            tn = 0.0
+            for i in range(m):
+                mn += miss[i, a] * miss[i, a]
+                tn += T[i, a] * T[i, a]
+            if np.sqrt(mn) > 1e-9 * (1.0 + np.sqrt(tn)):
+                alive[cols[a]] = False  # blocked: no carry
+            else:
+                for j in range(n):
+                    acc = 0.0
+                    for i in range(nb):
+                        acc += B[j, i] * C[i, a]
+                    D[j, cols[a]] -= acc
 
     @_nb.njit(cache=True, nogil=True)
     def _kkt(upper, last, has_last, n, fixed, values):  # pragma: no cover - compiled
@@ -522,6 +737,7 @@ if ENABLED:  # pragma: no branch - the environment decides
 
     equality_stack = _equality_stack
     equality_all = _equality_all
+    box_steps = _box_steps
     bounds_prepare = _bounds_prepare
     kkt = _kkt
     residuals = _residuals

@@ -1033,8 +1033,12 @@ class HierarchySolver:
                 verdict = self._box_kkt(st, stepper, W, values, s, it == 0)
                 if verdict is None:  # the shape does not allow one KKT solve: level by level
                     stepper.fix(W, values)
-                    dual = DualCheck(n, W, s) if len(W) else None
-                    ranks = self._box_steps(st, stepper, dual)
+                    compiled = self._box_steps_compiled(st, stepper, W, values, s)
+                    if compiled is not None:
+                        ranks, dual = compiled
+                    else:
+                        dual = DualCheck(n, W, s) if len(W) else None
+                        ranks = self._box_steps(st, stepper, dual)
                     release = -1
                 else:
                     ranks, release = verdict
@@ -1377,6 +1381,42 @@ class HierarchySolver:
                 ranks[k] = one([k], False)
         _remember_box_plan(st, ranks, levels)
         return ranks
+
+    def _box_steps_compiled(
+        self,
+        st: _Structure,
+        stepper: NullspaceStepper,
+        W: np.ndarray,
+        values: np.ndarray,
+        s: np.ndarray,
+    ) -> tuple[np.ndarray, _Verdict] | None:
+        """:meth:`_box_steps` with its :class:`DualCheck` as one compiled call
+        (:func:`._eqkernel.box_steps`): the ranks, and the dual verdict with the
+        minimum-norm criterion already applied at the point (which lands in
+        ``stepper``; its basis is then stale). None when the kernels are off or there
+        is no level below the box (the NumPy path then)."""
+        if not self.jit:
+            return None
+        eb = st.eq_bounds
+        levels = [k for k in range(1, len(eb)) if eb[k][1] > eb[k][0]]
+        if not levels:
+            return None
+        blocks = st.box_blocks
+        if blocks is None:
+            blocks = [(k, k + 1) for k in levels]
+        try:
+            x, ranks, failed, worst = _eqkernel.box_steps(
+                st.Aeq, st.eq_starts, np.array(blocks, dtype=np.int64).reshape(-1, 2),
+                self._fro, self.rank_tol, levels[-1], W.astype(np.int64, copy=False), values,
+                s, DUAL_TOL,
+            )  # fmt: skip
+        except TypeError as exc:  # types the kernel was not compiled for: NumPy
+            self._stop_jit(exc)
+            return None
+        stepper.set_point(x)
+        ranks = ranks.astype(np.intp)
+        _remember_box_plan(st, ranks, levels)
+        return ranks, _Verdict(bool(failed), int(worst))
 
     def _qp_level(
         self, st: _Structure, stepper: NullspaceStepper, k: int, lam: float
@@ -1746,6 +1786,21 @@ def _as_vector(v, k: int, name: str, m: int) -> np.ndarray:
             f"level {k}: {name} has shape {v.shape}, expected ({m},) (A has {m} rows)"
         )
     return v
+
+
+class _Verdict:
+    """A :class:`DualCheck`'s outcome computed elsewhere (by the compiled
+    :meth:`HierarchySolver._box_steps_compiled`, the minimum-norm criterion included):
+    what :meth:`HierarchySolver._solve_box` reads of it."""
+
+    __slots__ = ("failed", "worst")
+
+    def __init__(self, failed: bool, worst: int) -> None:
+        self.failed = failed
+        self.worst = worst
+
+    def finish(self, x: np.ndarray) -> None:
+        """Already applied."""
 
 
 class _StackedLevels:
