@@ -737,6 +737,33 @@ def test_ten_tasks_take_the_free_lane_with_the_same_control(bench_sot, monkeypat
 
 
 @needs_kernels
+def test_twenty_tasks_take_the_compiled_box_steps_with_the_same_control(bench_sot, monkeypatch):
+    """Twenty tasks on Talos: joint limits reached and levels of deficient rank below
+    them, the box path level by level; compiled (``_eqkernel.box_steps``) or not, the
+    same states."""
+    from sotpy.solvers import _eqkernel
+
+    calls = Counter()
+    real = _eqkernel.box_steps
+
+    def spy(*args):
+        calls["box_steps"] += 1
+        return real(*args)
+
+    monkeypatch.setattr(_eqkernel, "box_steps", spy)
+    on = bench_sot.build_sotpy_tasks(20, prefix=ON)
+    off = bench_sot.build_sotpy_tasks(20, prefix=OFF)
+    off.sot._solver._box_steps_compiled = lambda *args: None
+    for _ in range(25):
+        on.device.increment(DT)
+        off.device.increment(DT)
+        np.testing.assert_allclose(
+            on.device.state.value, off.device.state.value, rtol=0, atol=1e-12
+        )
+    assert calls["box_steps"] >= 10, calls
+
+
+@needs_kernels
 def test_a_task_changing_size_goes_through_the_levels_once(bench_sot, scenes):
     on, off = build_pair(bench_sot, scenes("talos"))
     calls = count_solves(on.sot)

@@ -45,20 +45,22 @@ def warm_up() -> None:
     starts = np.array([0, 1, n], dtype=np.int64)
     blocks = np.array([[0, 1], [1, 2]], dtype=np.int64)
     lams = np.zeros(2)
-    equality_all(A, starts, blocks, lams, 1e-9, 1)
-    equality_stack(A, starts, blocks, np.ones(2), lams, 1e-9, 1)
-    kkt(A[:1], A[1:], True, n, np.zeros(1, dtype=np.int64), np.zeros(1))
-    residuals(A, np.ones(n + 1), starts, np.zeros(n), np.ones(n), True)
-    box_update(  # a column slice of the stacked buffer, as the solver passes it
+    # the kernels themselves, not the module's names (a test may have wrapped those)
+    _equality_all(A, starts, blocks, lams, 1e-9, 1)
+    _equality_stack(A, starts, blocks, np.ones(2), lams, 1e-9, 1)
+    _kkt(A[:1], A[1:], True, n, np.zeros(1, dtype=np.int64), np.zeros(1))
+    _residuals(A, np.ones(n + 1), starts, np.zeros(n), np.ones(n), True)
+    _box_update(  # a column slice of the stacked buffer, as the solver passes it
         A[:, :n], n, n, np.arange(n), np.ones(n), -np.ones(n), np.ones(n), np.zeros(n), np.zeros(n),
         np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_),
     )  # fmt: skip
     z = np.zeros(n)
-    bounds_prepare(A, -np.ones(n), np.ones(n), z, z.copy(), z.copy(), z.copy(),
-                   np.zeros(n, dtype=np.bool_), starts)  # fmt: skip
-    box_steps(A, starts, blocks, np.ones(2), 1e-9, 1, np.zeros(1, dtype=np.int64), np.zeros(1),
-              np.ones(1), 1e-10)  # fmt: skip
-    for fn in (equality_all, equality_stack, kkt, residuals, box_update, bounds_prepare, box_steps):
+    _bounds_prepare(A, -np.ones(n), np.ones(n), z, z.copy(), z.copy(), z.copy(),
+                    np.zeros(n, dtype=np.bool_), starts)  # fmt: skip
+    _box_steps(A, starts, blocks, np.ones(2), 1e-9, 1, np.zeros(1, dtype=np.int64), np.zeros(1),
+               np.ones(1), 1e-10)  # fmt: skip
+    for fn in (_equality_all, _equality_stack, _kkt, _residuals, _box_update, _bounds_prepare,
+               _box_steps):  # fmt: skip
         fn.disable_compile()
     _warm.append(True)
     report_compile("the hierarchical solver kernels", time.perf_counter() - start)
