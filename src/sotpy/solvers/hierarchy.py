@@ -64,7 +64,9 @@ Solution paths
   below the box (the SOT's usual tick) the whole iteration is one compiled call
   (:mod:`._boxkkt`) when it can prove its answer, and the next call with the same row
   classes adds the bookkeeping and the box to that call (the *lane*; the *free lane*
-  likewise when the levels below are of deficient rank and no bound is held);
+  likewise when the levels below are of deficient rank and no bound is held); when
+  that call cannot answer (levels of deficient rank with bounds held), each pass level
+  by level with its multiplier check is one compiled call too;
 * with inequalities: first the equality rows of the whole stack (the *shortcut*); if
   the point satisfies every inequality row it is the answer (it is optimal for a
   relaxation and feasible). Otherwise level by level: the equality step ignoring the
