@@ -429,12 +429,10 @@ def posture_split(levels, at_lo, at_hi):
     ``(answered, x_aug, mu_U, inputs)``, ``x_aug`` starting as ones (to see what is
     written), ``inputs`` those of :func:`kernel_inputs`."""
     inputs = kernel_inputs(levels, at_lo, at_hi)
-    A, s1, split, W, vals, F, (work, iwork, iw, ch) = inputs
+    A, s1, split, W, vals, F, _ = inputs
     row_of = _boxkkt._posture_columns(A, split)
     x, mu = np.ones(A.shape[1]), np.zeros(split - s1)
-    ok = _boxkkt._posture_solve(
-        A, s1, split - s1, row_of, W, vals, F, x, mu, 1e-9, work, iwork, iw, ch
-    )
+    ok = _boxkkt._posture_solve(A, s1, split - s1, row_of, W, vals, F, x, mu, 1e-9)
     return ok, x, mu, inputs
 
 

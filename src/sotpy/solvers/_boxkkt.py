@@ -51,7 +51,11 @@ when ``rcond(R_N)^2 >= RCOND_MIN`` and ``rcond(R_M) >= RCOND_MIN``, the same pai
 conditions, and else leaves the iteration to the general solve (so the call refuses no
 shape it answered before). For Talos (17 upper rows, 6 free-flyer and 31 free joint
 variables) that is two QR of 17 x 6 and 31 x 11 and one ``Q_N^T`` applied to 17 x 32,
-against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37.
+against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37. At these sizes the
+split does its QRs, products and triangular solves with :mod:`._smallqr` rather than
+LAPACK (whose fixed cost per call dominates there), and its ``rcond`` is the exact
+1-norm one, from the small triangle's inverse: never above ``dtrcon``'s estimate, so
+the split refuses a little sooner, never later.
 
 The multipliers: with ``g`` the gradient of the last objective at ``x`` (``L^T (L x -
 c)``, or ``x`` for the minimum norm), ``U_F^T \mu_U = -g_F`` gives ``\mu_U = -R^{-1}
@@ -93,6 +97,7 @@ if ENABLED:  # pragma: no branch - the environment decides
         _residuals,
         _trtrs_upper,
     )
+    from ._smallqr import householder_qr, rcond_upper, reflect_rows, reflect_vector, solve_upper
 
     _dgeqrf = _external("dgeqrf", 8)
     _dtrcon = _external("dtrcon", 10)
@@ -153,9 +158,7 @@ if ENABLED:  # pragma: no branch - the environment decides
         return row_of
 
     @_nb.njit(cache=True, nogil=True)
-    def _posture_solve(
-        A, s1, mu_, row_of, W, vals, F, x_aug, muU, rcond_min, work, iwork, iw, ch
-    ):  # pragma: no cover - compiled
+    def _posture_solve(A, s1, mu_, row_of, W, vals, F, x_aug, muU, rcond_min):  # pragma: no cover
         """The last level a posture (see :func:`_posture_columns`): the solve and the
         upper rows' multipliers of the module doc by the split of the free variables
         into ``P`` (a posture row each) and ``N`` (none; may be empty, then ``Q_N =
@@ -185,9 +188,9 @@ if ENABLED:  # pragma: no branch - the environment decides
             else:
                 P[b] = F[i]
                 b += 1
-        # U_N (Fortran), [U_P | d] (Fortran), d = b_U - U_W x_W
+        # U_N (Fortran), [U_P | d] (C order: Q_N^T runs along its rows), d = b_U - U_W x_W
         UN = np.empty((nN, mu_)).T
-        UP = np.empty((nP + 1, mu_)).T
+        UP = np.empty((mu_, nP + 1))
         for r in range(mu_):
             row = s1 + r
             acc = -A[row, n]
@@ -198,19 +201,19 @@ if ENABLED:  # pragma: no branch - the environment decides
                 UN[r, i] = A[row, N[i]]
             for i in range(nP):
                 UP[r, i] = A[row, P[i]]
+        # the small QRs and their uses by :mod:`._smallqr` (no LAPACK call: see there)
         tauN = np.empty(max(nN, 1))
         if nN > 0:
-            if _geqrf(UN, tauN, work, iw) != 0:
-                return False
-            rc = _rcond_upper(UN, nN, work, iwork, iw, ch)
+            householder_qr(UN, tauN)
+            rc = rcond_upper(UN, nN)
             if not rc * rc >= rcond_min:
                 return False
-            _ormqr(_L, _T, UN, nN, tauN, UP, work, iw, ch)  # [U_P | d] <- Q_N^T [U_P | d]
+            reflect_rows(UN, tauN, nN, UP, np.empty(nP + 1), True)  # Q_N^T [U_P | d]
         c = np.empty(nP)
         for i in range(nP):
             c[i] = -A[row_of[P[i]], n]
         t = np.zeros(max(mM, 1))
-        z = np.zeros((1, nP)).T  # x_P - c = M^T nu
+        z = np.zeros(nP)  # x_P - c = M^T nu
         if mM > 0:
             # M^T (Fortran) from the rows of Q_N^T U_P below R_N; t = e - M c
             Mt = np.empty((mM, nP)).T
@@ -222,16 +225,15 @@ if ENABLED:  # pragma: no branch - the environment decides
                     acc -= v * c[i]
                 t[r] = acc
             tauM = np.empty(mM)
-            if _geqrf(Mt, tauM, work, iw) != 0:
+            householder_qr(Mt, tauM)
+            if not rcond_upper(Mt, mM) >= rcond_min:
                 return False
-            if not _rcond_upper(Mt, mM, work, iwork, iw, ch) >= rcond_min:
-                return False
-            _trtrs_upper(Mt, mM, _T, t, iw, ch)  # R_M^T t' = t
-            z[:mM, 0] = t[:mM]
-            _ormqr(_L, _N, Mt, mM, tauM, z, work, iw, ch)  # Q_M [t'; 0]
-            _trtrs_upper(Mt, mM, _N, t, iw, ch)  # R_M nu = t'
+            solve_upper(Mt, mM, t, True)  # R_M^T t' = t
+            z[:mM] = t[:mM]
+            reflect_vector(Mt, tauM, mM, z, False)  # Q_M [t'; 0]
+            solve_upper(Mt, mM, t, False)  # R_M nu = t'
         for i in range(nP):
-            x_aug[P[i]] = c[i] + z[i, 0]
+            x_aug[P[i]] = c[i] + z[i]
         # x_N from R_N x_N = (Q_N^T d)_N - (Q_N^T U_P)_N x_P
         if nN > 0:
             xN = np.empty(nN)
@@ -240,19 +242,19 @@ if ENABLED:  # pragma: no branch - the environment decides
                 for i in range(nP):
                     acc -= UP[r, i] * x_aug[P[i]]
                 xN[r] = acc
-            _trtrs_upper(UN, nN, _N, xN, iw, ch)
+            solve_upper(UN, nN, xN, False)
             for i in range(nN):
                 x_aug[N[i]] = xN[i]
         for i in range(w):
             x_aug[W[i]] = vals[i]
         # mu_U = -Q_N [0; nu]
-        h = np.zeros((1, mu_)).T
+        h = np.zeros(mu_)
         for r in range(mM):
-            h[nN + r, 0] = t[r]
+            h[nN + r] = t[r]
         if nN > 0 and mM > 0:
-            _ormqr(_L, _N, UN, nN, tauN, h, work, iw, ch)
+            reflect_vector(UN, tauN, nN, h, False)
         for r in range(mu_):
-            muU[r] = -h[r, 0]
+            muU[r] = -h[r]
         return True
 
     @_nb.njit(cache=True, nogil=True)
@@ -438,9 +440,7 @@ if ENABLED:  # pragma: no branch - the environment decides
             # then the only one; no multiplier is needed)
             mp = split - s1
             if row_of.shape[0] > 0 and mp > 0 and (not minnorm or (w == 0 and m - s1 == nf)):
-                posture = _posture_solve(
-                    A, s1, mp, row_of, W, vals, F, x_aug, muU, rcond_min, work, iwork, iw, ch
-                )
+                posture = _posture_solve(A, s1, mp, row_of, W, vals, F, x_aug, muU, rcond_min)
             if posture:
                 _gradient(A, split, minnorm, x_aug, g)
             elif not _general_solve(
