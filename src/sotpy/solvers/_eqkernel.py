@@ -2,11 +2,13 @@
 (internal to ``sotpy.solvers``; see :mod:`sotpy._jit`).
 
 :func:`equality_stack` runs the null-space recursion over a whole stack of equality
-levels with the same LAPACK routines and the same arithmetic as
-:meth:`NullspaceStepper.step` (``dgeqp3`` of ``M^T``, the rank from ``|R_ii|``, the step
-by ``dtrtrs`` or ``dgels``, ``Z`` updated by ``dormqr``; the least-squares last level
-from a pivoted QR of ``M``), reached from numba through the addresses that
-``scipy.linalg.cython_lapack`` exports, so the calls cost no Python. Blocks of
+levels with the arithmetic of :meth:`NullspaceStepper.step`: ``dgeqp3`` of ``M^T``, the
+rank from ``|R_ii|``, the step by a triangular solve or ``dgels``, ``Z`` updated by the
+reflectors; the least-squares last level from a pivoted QR of ``M``. The LAPACK
+routines are reached from numba through the addresses that
+``scipy.linalg.cython_lapack`` exports, so the calls cost no Python; the reflections
+and triangular solves are those of :mod:`._smallqr` (LAPACK's ``dormqr`` and ``dtrtrs``
+cost more in fixed overhead than in flops at these sizes). Blocks of
 consecutive levels known to be of full row rank are stepped together, as by
 :meth:`HierarchySolver._solve_equality`. ``None`` when compiled kernels are disabled.
 """
@@ -72,6 +74,8 @@ if ENABLED:  # pragma: no branch - the environment decides
     from numba import types as _t
     from numba.extending import get_cython_function_address as _address
 
+    from ._smallqr import reflect_rows, reflect_vector, solve_upper
+
     def _external(name: str, nargs: int):
         symbol = f"sotpy_lapack_{name}"
         _llvm.add_symbol(symbol, _address("scipy.linalg.cython_lapack", name))
@@ -101,16 +105,16 @@ if ENABLED:  # pragma: no branch - the environment decides
         return iw[4]
 
     @_nb.njit(cache=True, nogil=True)
-    def _ormqr_ld(side, trans, rows, cols, k, refl, tau, c, ldc, work, iw, ch):  # pragma: no cover
-        """:func:`_ormqr` on the leading ``rows x cols`` block of ``c``, whose leading
-        dimension is ``ldc`` (a block of rows of a Fortran array)."""
+    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
+        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
+        in the columns of the Fortran array ``refl``."""
         ch[0] = side
         ch[1] = trans
-        iw[0] = rows
-        iw[1] = cols
+        iw[0] = c.shape[0]
+        iw[1] = c.shape[1]
         iw[2] = k
         iw[3] = max(refl.shape[0], 1)
-        iw[5] = max(ldc, 1)
+        iw[5] = max(c.shape[0], 1)
         iw[6] = work.shape[0]
         _dormqr(
             ch[0:].ctypes, ch[1:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes,
@@ -118,13 +122,6 @@ if ENABLED:  # pragma: no branch - the environment decides
             work.ctypes, iw[6:].ctypes, iw[7:].ctypes,
         )  # fmt: skip
         return iw[7]
-
-    @_nb.njit(cache=True, nogil=True)
-    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
-        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
-        in the columns of the Fortran array ``refl``."""
-        return _ormqr_ld(side, trans, c.shape[0], c.shape[1], k, refl, tau, c, c.shape[0],
-                         work, iw, ch)  # fmt: skip
 
     @_nb.njit(cache=True, nogil=True)
     def _trtrs_upper(a, n, trans, b, iw, ch):  # pragma: no cover
@@ -232,10 +229,9 @@ if ENABLED:  # pragma: no branch - the environment decides
             # least squares from a pivoted QR of M itself
             qr = np.asfortranarray(maug[:, :nf])
             if _geqp3(qr, jpvt[:nf], tau[:nf], work, iw) == 0 and abs(qr[nf - 1, nf - 1]) > thr:
-                c = np.asfortranarray(maug[:, nf:])
-                _ormqr(_L, _T, qr, nf, tau[:nf], c, work, iw, ch)
-                y = np.ascontiguousarray(c[:nf, 0])
-                _trtrs_upper(qr, nf, _N, y, iw, ch)
+                y = maug[:, nf].copy()
+                reflect_vector(qr, tau, nf, y, True)  # Q^T (b - A x)
+                solve_upper(qr, nf, y, False)
                 v = np.zeros(nf)
                 for i in range(nf):
                     v[jpvt[i] - 1] = y[i]
@@ -256,13 +252,12 @@ if ENABLED:  # pragma: no branch - the environment decides
             for j in range(m):
                 for i in range(j + 1):
                     keep[i, j] = qr[i, j]
-        refl = qr[:, :kmax]
         ep = np.empty(m)
         for i in range(m):
             ep[i] = maug[jpvt[i] - 1, nf]
         if r == m and lam == 0.0:
             z = ep
-            _trtrs_upper(qr, m, _T, z, iw, ch)  # R^T z = ep
+            solve_upper(qr, m, z, True)  # R^T z = ep
         else:
             rows_ls = m + r if lam > 0.0 else m
             L = np.zeros((rows_ls, r), dtype=np.float64).T.copy().T  # Fortran
@@ -279,24 +274,27 @@ if ENABLED:  # pragma: no branch - the environment decides
         if need and c0 == 0:
             # W = I (no step yet): Z Q = Q, of which only the null-space columns
             # Q[:, r:] = Q [0; I] are used from now on: the columns r: of W, which
-            # hold [0; I] (a left product on n - r columns instead of a right one on n)
-            _ormqr_ld(_L, _N, n, n - r, kmax, refl, tau[:kmax], W[:, r:], n + 1, work, iw, ch)
-            v = np.zeros((1, nf)).T  # Fortran
-            for i in range(r):
-                v[i, 0] = z[i]
-            _ormqr(_L, _N, refl, kmax, tau[:kmax], v, work, iw, ch)
+            # hold [0; I] (a left product on n - r columns instead of a right one on n),
+            # formed in C order (the reflections run along its rows) and copied in
+            q0 = np.zeros((n, n - r))
+            for j in range(n - r):
+                q0[r + j, j] = 1.0
+            reflect_rows(qr, tau, kmax, q0, work, False)
+            W.T[r:n, :n] = q0.T
+            v = np.zeros(nf)
+            v[:r] = z[:r]
+            reflect_vector(qr, tau, kmax, v, False)
             for i in range(n):  # x = 0 - Q [z; 0]
-                W[i, n] = -v[i, 0]
+                W[i, n] = -v[i]
         elif need:
-            zq = W[:, c0:n]
-            _ormqr(_R, _N, refl, kmax, tau[:kmax], zq, work, iw, ch)
+            # Z Q: (Z Q)^T = Q^T Z^T, and Z^T is the C-order view W.T[c0:n]
+            reflect_rows(qr, tau, kmax, W.T[c0:n], work, True)
             W[:, n] -= z[:r] @ W.T[c0 : c0 + r]
         else:
-            v = np.zeros((nf, 1)).T.copy().T
-            for i in range(r):
-                v[i, 0] = z[i]
-            _ormqr(_L, _N, refl, kmax, tau[:kmax], v, work, iw, ch)
-            W[:, n] -= np.ascontiguousarray(v[:, 0]) @ W.T[c0:n]
+            v = np.zeros(nf)
+            v[:r] = z[:r]
+            reflect_vector(qr, tau, kmax, v, False)
+            W[:, n] -= v @ W.T[c0:n]
         return r
 
     @_nb.njit(cache=True, nogil=True)
