@@ -405,23 +405,16 @@ def posture_stack(rng, n_base, n_joints, selected, tight=0.5, upper=None):
 
 def kernel_inputs(levels, at_lo, at_hi):
     """The compiled kernel's inputs for ``levels`` (as the solver stacks them) and the
-    fixed/free split of the guess ``at_lo | at_hi``, with the scratch arrays."""
+    fixed/free split of the guess ``at_lo | at_hi``."""
     solver = HierarchySolver()
     st, parsed, general = solver._prepare(levels)
     solver._bookkeep(st, parsed, general)
     box = solver._box(st)
-    n = solver.n
     held = at_lo | at_hi
     W = np.flatnonzero(held).astype(np.int64)
     F = np.flatnonzero(~held).astype(np.int64)
     vals = np.where(at_lo, box.lo, box.hi)[W]
-    scratch = (
-        np.empty(64 * (n + st.A.shape[0] + 2)),
-        np.empty(n, dtype=np.int32),
-        np.zeros(8, dtype=np.int32),
-        np.zeros(3, dtype=np.uint8),
-    )
-    return st.A, int(st.starts[1]), int(st.starts[st.last]), W, vals, F, scratch
+    return st.A, int(st.starts[1]), int(st.starts[st.last]), W, vals, F
 
 
 def posture_split(levels, at_lo, at_hi):
@@ -429,7 +422,7 @@ def posture_split(levels, at_lo, at_hi):
     ``(answered, x_aug, mu_U, inputs)``, ``x_aug`` starting as ones (to see what is
     written), ``inputs`` those of :func:`kernel_inputs`."""
     inputs = kernel_inputs(levels, at_lo, at_hi)
-    A, s1, split, W, vals, F, _ = inputs
+    A, s1, split, W, vals, F = inputs
     row_of = _boxkkt._posture_columns(A, split)
     x, mu = np.ones(A.shape[1]), np.zeros(split - s1)
     ok = _boxkkt._posture_solve(A, s1, split - s1, row_of, W, vals, F, x, mu, 1e-9)
@@ -467,14 +460,12 @@ def test_posture_split_gives_the_general_solve(seed, shape):
     at_hi[fixed[1::2]] = True
     ok, x_p, mu_p, inputs = posture_split(levels, at_lo, at_hi)
     assert ok
-    A, s1, split, W, vals, F, (work, iwork, iw, ch) = inputs
+    A, s1, split, W, vals, F = inputs
     mu_ = split - s1
     assert len(_boxkkt._posture_columns(A, split)) == n  # recognised as a posture
     x_g, mu_g, g = np.ones(n + 1), np.zeros(mu_), np.empty(n)
     ml = A.shape[0] - split
-    assert _boxkkt._general_solve(
-        A, s1, split, mu_, ml, False, W, vals, F, x_g, g, mu_g, 1e-9, work, iwork, iw, ch
-    )
+    assert _boxkkt._general_solve(A, s1, split, mu_, ml, False, W, vals, F, x_g, g, mu_g, 1e-9)
     np.testing.assert_allclose(x_p, x_g, atol=1e-11 * (1 + np.abs(x_g).max()))
     np.testing.assert_allclose(mu_p, mu_g, atol=1e-10 * (1 + np.abs(mu_g).max()))
     # and both are the KKT point: upper rows met, stationarity on the free variables

@@ -17,17 +17,24 @@ variables moved to the right-hand sides ``d`` and ``c``):
 
     \min_{x_F} \tfrac12 \|L x_F - c\|^2 \quad \text{s.t.} \quad U x_F = d
 
-by the null-space method: ``U^T = Q [R; 0]`` (``dgeqrf``), ``x_F = Q [y_1; y_2]`` with
-``R^T y_1 = d`` and ``y_2`` the least-squares solution of ``(L Q_2) y_2 = c - L Q_1 y_1``
-(``dgeqrf`` of ``L Q_2``; ``L Q`` by ``dormqr``). When every level fits in the free
+by the null-space method: ``U^T = Q [R; 0]`` (Householder QR), ``x_F = Q [y_1; y_2]``
+with ``R^T y_1 = d`` and ``y_2`` the least-squares solution of ``(L Q_2) y_2 = c - L Q_1
+y_1`` (a QR of ``L Q_2``; ``L Q`` by the reflectors). When every level fits in the free
 directions (``m_U + m_L <= |F|``) all of them go into ``U`` and the point is the
 minimum-norm solution ``x_F = Q_1 R^{-T} d``. Either way the answer is the unique
 lexicographic optimum with ``W`` fixed when ``R`` (``U`` of full row rank) and ``L Q_2``
 (``L`` of full column rank on the null space of ``U``) are well conditioned; the call is
 refused otherwise (the null-space recursion's rank threshold decides then). The
-conditions, with LAPACK's 1-norm estimate ``dtrcon``: ``rcond(R) >= RCOND_MIN`` and
-``rcond(L Q_2)^2 >= RCOND_MIN`` (the reduced Hessian ``(L Q_2)^T (L Q_2)`` is what the
-one-system KKT solve of :mod:`._kkt` conditions on), with :data:`._kkt.RCOND_MIN`.
+conditions, with the exact 1-norm reciprocal condition number of the triangular
+factors: ``rcond(R) >= RCOND_MIN`` and ``rcond(L Q_2)^2 >= RCOND_MIN`` (the reduced
+Hessian ``(L Q_2)^T (L Q_2)`` is what the one-system KKT solve of :mod:`._kkt`
+conditions on), with :data:`._kkt.RCOND_MIN`.
+
+The QRs, the products with ``Q``, the triangular solves and the condition numbers are
+those of :mod:`._smallqr`, compiled loops inside the call: at these sizes a LAPACK call
+costs more in fixed overhead than in flops, the more so inside a control tick. Its
+``rcond`` comes from the triangle's inverse; it is never above LAPACK's estimate
+(``dtrcon``), so a call refuses a little sooner than with it, never later.
 
 The SOT's last level is usually a posture: rows of the identity on joint variables
 (:func:`_posture_columns` recognises them). Then, with ``P`` the free variables with a
@@ -51,11 +58,7 @@ when ``rcond(R_N)^2 >= RCOND_MIN`` and ``rcond(R_M) >= RCOND_MIN``, the same pai
 conditions, and else leaves the iteration to the general solve (so the call refuses no
 shape it answered before). For Talos (17 upper rows, 6 free-flyer and 31 free joint
 variables) that is two QR of 17 x 6 and 31 x 11 and one ``Q_N^T`` applied to 17 x 32,
-against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37. At these sizes the
-split does its QRs, products and triangular solves with :mod:`._smallqr` rather than
-LAPACK (whose fixed cost per call dominates there), and its ``rcond`` is the exact
-1-norm one, from the small triangle's inverse: never above ``dtrcon``'s estimate, so
-the split refuses a little sooner, never later.
+against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37.
 
 The multipliers: with ``g`` the gradient of the last objective at ``x`` (``L^T (L x -
 c)``, or ``x`` for the minimum norm), ``U_F^T \mu_U = -g_F`` gives ``\mu_U = -R^{-1}
@@ -84,55 +87,8 @@ OK, REFUSED, UNDECIDED, NOT_CONVERGED, LEFT = 0, 1, 2, 3, 4
 if ENABLED:  # pragma: no branch - the environment decides
     import numba as _nb
 
-    from ._eqkernel import (
-        _L,
-        _N,
-        _R,
-        _T,
-        _bounds,
-        _box_update,
-        _equality_stack,
-        _external,
-        _ormqr,
-        _residuals,
-        _trtrs_upper,
-    )
+    from ._eqkernel import _bounds, _box_update, _equality_stack, _residuals
     from ._smallqr import householder_qr, rcond_upper, reflect_rows, reflect_vector, solve_upper
-
-    _dgeqrf = _external("dgeqrf", 8)
-    _dtrcon = _external("dtrcon", 10)
-    _O = ord("1")
-
-    @_nb.njit(cache=True, nogil=True)
-    def _geqrf(a, tau, work, iw):  # pragma: no cover - compiled
-        """QR in place of the Fortran array ``a`` (no pivoting)."""
-        iw[0] = a.shape[0]
-        iw[1] = a.shape[1]
-        iw[2] = max(a.shape[0], 1)
-        iw[3] = work.shape[0]
-        _dgeqrf(
-            iw[0:].ctypes, iw[1:].ctypes, a.ctypes, iw[2:].ctypes, tau.ctypes,
-            work.ctypes, iw[3:].ctypes, iw[4:].ctypes,
-        )  # fmt: skip
-        return iw[4]
-
-    @_nb.njit(cache=True, nogil=True)
-    def _rcond_upper(a, k, work, iwork, iw, ch):  # pragma: no cover - compiled
-        """Reciprocal condition number (1-norm estimate) of the upper triangle of the
-        leading ``k x k`` block of the Fortran array ``a``."""
-        ch[0] = _O
-        ch[1] = ord("U")
-        ch[2] = _N
-        iw[0] = k
-        iw[1] = max(a.shape[0], 1)
-        rc = np.zeros(1)
-        _dtrcon(
-            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, a.ctypes,
-            iw[1:].ctypes, rc.ctypes, work.ctypes, iwork.ctypes, iw[2:].ctypes,
-        )  # fmt: skip
-        if iw[2] != 0:
-            return 0.0
-        return rc[0]
 
     @_nb.njit(cache=True, nogil=True)
     def _posture_columns(A, split):  # pragma: no cover - compiled
@@ -276,13 +232,13 @@ if ENABLED:  # pragma: no branch - the environment decides
 
     @_nb.njit(cache=True, nogil=True)
     def _general_solve(
-        A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
-        rcond_min, work, iwork, iw, ch,
-    ):  # fmt: skip  # pragma: no cover - compiled
+        A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU, rcond_min
+    ):  # pragma: no cover - compiled
         """The solve of the module doc for any last level (or the minimum norm when
         ``minnorm``): ``x_aug``, the gradient ``g`` and the upper rows' multipliers
         ``muU`` written in place. ``False`` (refused) when ``R`` or ``L Q_2`` is
-        ill-conditioned."""
+        ill-conditioned. The caller ensures ``m_U <= |F|`` and, unless ``minnorm``,
+        ``m_L >= |F| - m_U``."""
         n = A.shape[1] - 1
         w = W.shape[0]
         nf = F.shape[0]
@@ -297,66 +253,59 @@ if ENABLED:  # pragma: no branch - the environment decides
             y[r] = acc
             for i in range(nf):
                 Ut[i, r] = A[row, F[i]]
-        kq = min(nf, mu_)
-        tau = np.empty(max(kq, 1))
+        tau = np.empty(max(mu_, 1))
         if mu_ > 0:
-            if _geqrf(Ut, tau[:kq], work, iw) != 0:
+            householder_qr(Ut, tau)
+            if not rcond_upper(Ut, mu_) >= rcond_min:
                 return False
-            if not _rcond_upper(Ut, mu_, work, iwork, iw, ch) >= rcond_min:
-                return False
-            y1 = y[:mu_]
-            _trtrs_upper(Ut, mu_, _T, y1, iw, ch)  # R^T y_1 = d
+            solve_upper(Ut, mu_, y, True)  # R^T y_1 = d
         if not minnorm:
             k2 = nf - mu_
             # B = L_F (m_L x nf, Fortran) and c = b_L - L_W x_W
             B = np.empty((nf, ml)).T
-            c = np.empty((1, ml)).T
+            c = np.empty(ml)
             for r in range(ml):
                 row = split + r
                 acc = -A[row, n]
                 for i in range(w):
                     acc -= A[row, W[i]] * vals[i]
-                c[r, 0] = acc
+                c[r] = acc
                 for i in range(nf):
                     B[r, i] = A[row, F[i]]
-            if mu_ > 0:
-                _ormqr(_R, _N, Ut, kq, tau[:kq], B, work, iw, ch)  # B <- L_F Q
+            if mu_ > 0:  # B <- L_F Q, as (L_F Q)^T = Q^T L_F^T on the C-order view B.T
+                reflect_rows(Ut, tau, mu_, B.T, np.empty(ml), True)
             for r in range(ml):
-                acc = c[r, 0]
+                acc = c[r]
                 for i in range(mu_):
                     acc -= B[r, i] * y[i]
-                c[r, 0] = acc
+                c[r] = acc
             if k2 > 0:
                 B2 = np.asfortranarray(B[:, mu_:])
                 tau2 = np.empty(k2)
-                if _geqrf(B2, tau2, work, iw) != 0:
-                    return False
-                rc = _rcond_upper(B2, k2, work, iwork, iw, ch)
+                householder_qr(B2, tau2)
+                rc = rcond_upper(B2, k2)
                 if not rc * rc >= rcond_min:
                     return False
-                _ormqr(_L, _T, B2, k2, tau2, c, work, iw, ch)  # c <- Q_2'^T c
-                y2 = np.ascontiguousarray(c[:k2, 0])
-                _trtrs_upper(B2, k2, _N, y2, iw, ch)
-                y[mu_:] = y2
+                reflect_vector(B2, tau2, k2, c, True)  # c <- Q_2'^T c
+                solve_upper(B2, k2, c, False)
+                y[mu_:] = c[:k2]
         # x_F = Q y
-        z = np.empty((1, nf)).T
-        z[:, 0] = y
+        z = y.copy()
         if mu_ > 0:
-            _ormqr(_L, _N, Ut, kq, tau[:kq], z, work, iw, ch)
+            reflect_vector(Ut, tau, mu_, z, False)
         for i in range(w):
             x_aug[W[i]] = vals[i]
         for i in range(nf):
-            x_aug[F[i]] = z[i, 0]
+            x_aug[F[i]] = z[i]
         _gradient(A, split, minnorm, x_aug, g)
         if mu_ > 0:
-            h = np.empty((1, nf)).T
+            h = np.empty(nf)
             for i in range(nf):
-                h[i, 0] = g[F[i]]
-            _ormqr(_L, _T, Ut, kq, tau[:kq], h, work, iw, ch)
-            mu = np.ascontiguousarray(h[:mu_, 0])
-            _trtrs_upper(Ut, mu_, _N, mu, iw, ch)
+                h[i] = g[F[i]]
+            reflect_vector(Ut, tau, mu_, h, True)
+            solve_upper(Ut, mu_, h, False)
             for r in range(mu_):
-                muU[r] = -mu[r]
+                muU[r] = -h[r]
         return True
 
     @_nb.njit(cache=True, nogil=True)
@@ -399,10 +348,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         m = A.shape[0]
         n = A.shape[1] - 1
         x_aug = np.ones(n + 1)
-        work = np.empty(64 * (n + m + 2))
-        iwork = np.empty(max(n, 1), dtype=np.int32)
-        iw = np.zeros(8, dtype=np.int32)
-        ch = np.zeros(3, dtype=np.uint8)
         res = np.zeros(starts.shape[0] - 1)
         row_of = _posture_columns(A, split)
         for it in range(max_iter):
@@ -444,9 +389,8 @@ if ENABLED:  # pragma: no branch - the environment decides
             if posture:
                 _gradient(A, split, minnorm, x_aug, g)
             elif not _general_solve(
-                A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
-                rcond_min, work, iwork, iw, ch,
-            ):  # fmt: skip
+                A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU, rcond_min
+            ):
                 return REFUSED, x_aug, res, minnorm, nf, mu_, it
             release = -1
             if w > 0:

@@ -82,13 +82,11 @@ if ENABLED:  # pragma: no branch - the environment decides
         return _t.ExternalFunction(symbol, _t.void(*([_t.voidptr] * nargs)))
 
     _dgeqp3 = _external("dgeqp3", 9)
-    _dormqr = _external("dormqr", 13)
-    _dtrtrs = _external("dtrtrs", 10)
     _dgels = _external("dgels", 11)
     _dgesv = _external("dgesv", 8)
     _dgecon = _external("dgecon", 9)
 
-    _R, _L, _N, _T, _U = ord("R"), ord("L"), ord("N"), ord("T"), ord("U")
+    _N = ord("N")
 
     @_nb.njit(cache=True, nogil=True)
     def _geqp3(a, jpvt, tau, work, iw):  # pragma: no cover - compiled
@@ -101,42 +99,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         _dgeqp3(
             iw[0:].ctypes, iw[1:].ctypes, a.ctypes, iw[2:].ctypes, jpvt.ctypes,
             tau.ctypes, work.ctypes, iw[3:].ctypes, iw[4:].ctypes,
-        )  # fmt: skip
-        return iw[4]
-
-    @_nb.njit(cache=True, nogil=True)
-    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
-        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
-        in the columns of the Fortran array ``refl``."""
-        ch[0] = side
-        ch[1] = trans
-        iw[0] = c.shape[0]
-        iw[1] = c.shape[1]
-        iw[2] = k
-        iw[3] = max(refl.shape[0], 1)
-        iw[5] = max(c.shape[0], 1)
-        iw[6] = work.shape[0]
-        _dormqr(
-            ch[0:].ctypes, ch[1:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes,
-            refl.ctypes, iw[3:].ctypes, tau.ctypes, c.ctypes, iw[5:].ctypes,
-            work.ctypes, iw[6:].ctypes, iw[7:].ctypes,
-        )  # fmt: skip
-        return iw[7]
-
-    @_nb.njit(cache=True, nogil=True)
-    def _trtrs_upper(a, n, trans, b, iw, ch):  # pragma: no cover
-        """``op(U) z = b`` in place of ``b`` (length ``n``), ``U`` the upper triangle of
-        the leading ``n x n`` block of the Fortran array ``a``."""
-        ch[0] = _U
-        ch[1] = trans
-        ch[2] = _N
-        iw[0] = n
-        iw[1] = 1
-        iw[2] = max(a.shape[0], 1)
-        iw[3] = max(n, 1)
-        _dtrtrs(
-            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, iw[1:].ctypes,
-            a.ctypes, iw[2:].ctypes, b.ctypes, iw[3:].ctypes, iw[4:].ctypes,
         )  # fmt: skip
         return iw[4]
 
