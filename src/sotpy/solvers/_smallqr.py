@@ -1,12 +1,15 @@
-r"""Householder QR and what the box path does with it, compiled, for small matrices
-(internal to ``sotpy.solvers``; see :mod:`sotpy._jit`).
+r"""Householder QR, products with ``Q`` and ``Q^T``, triangular solves and condition
+numbers, compiled, for small matrices (internal to ``sotpy.solvers``; see
+:mod:`sotpy._jit`).
 
 Below a few dozen rows a LAPACK call costs more in fixed overhead than in flops: the
 argument checks, the workspace and block-size queries, and one level-2 BLAS call
-(``dgemv``, ``dger``) per reflector and column block. :func:`._boxkkt._posture_solve`
-makes ten such calls on Talos (QRs of 17 x 6 and 32 x 11, ``Q^T`` of 17 x 33); done
-here, inside the one compiled call, they cost a fraction of it (the measurements are in
-``docs/solvers.md``).
+(``dgemv``, ``dger``) per reflector and column block; inside a control tick, whose other
+work has evicted LAPACK's code and data from the caches, more still. The box path's
+compiled call (:mod:`._boxkkt`) made ten such calls a tick on Talos (QRs of 17 x 6 and
+32 x 11, ``Q^T`` of 17 x 33, two ``dtrcon``, triangular solves); it now makes none, and
+the equality recursion (:mod:`._eqkernel`) keeps only ``dgeqp3`` and ``dgels`` (the
+measurements are in ``docs/solvers.md``).
 
 The storage is LAPACK's (``dgeqrf``): for a Fortran ``a`` (``m x k``, ``m >= k``),
 ``R`` on and above the diagonal, reflector ``i`` below it, with ``v_i = [0, ..., 0, 1,
