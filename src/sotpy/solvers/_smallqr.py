@@ -105,7 +105,8 @@ if ENABLED:  # pragma: no branch - the environment decides
 
     @_nb.njit(cache=True, nogil=True, error_model="numpy")
     def reflect_vector(a, tau, k, y, trans):  # pragma: no cover - compiled
-        """:func:`reflect_rows` for one vector ``y`` (length ``m``)."""
+        """:func:`reflect_rows` for one vector ``y`` (length ``m``); its own loops, as
+        :func:`reflect_rows` on a one-column view made the equality solve 4 µs slower."""
         m = a.shape[0]
         for t in range(k):
             i = t if trans else k - 1 - t
