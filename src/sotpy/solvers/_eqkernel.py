@@ -3,12 +3,13 @@
 
 :func:`equality_stack` runs the null-space recursion over a whole stack of equality
 levels with the arithmetic of :meth:`NullspaceStepper.step`: ``dgeqp3`` of ``M^T``, the
-rank from ``|R_ii|``, the step by a triangular solve or ``dgels``, ``Z`` updated by the
-reflectors; the least-squares last level from a pivoted QR of ``M``. The LAPACK
-routines are reached from numba through the addresses that
-``scipy.linalg.cython_lapack`` exports, so the calls cost no Python; the reflections
-and triangular solves are those of :mod:`._smallqr` (LAPACK's ``dormqr`` and ``dtrtrs``
-cost more in fixed overhead than in flops at these sizes). Blocks of
+rank from ``|R_ii|``, the step by a triangular solve or (a rank-deficient or damped
+block) a least-squares solve, ``Z`` updated by the reflectors; the least-squares last
+level from a pivoted QR of ``M``. ``dgeqp3`` is reached from numba through the address
+that ``scipy.linalg.cython_lapack`` exports, so the call costs no Python; the
+reflections, triangular solves and least squares are those of :mod:`._smallqr`
+(LAPACK's ``dormqr``, ``dtrtrs`` and ``dgels`` cost more in fixed overhead than in
+flops at these sizes). Blocks of
 consecutive levels known to be of full row rank are stepped together, as by
 :meth:`HierarchySolver._solve_equality`. ``None`` when compiled kernels are disabled.
 """
@@ -74,7 +75,7 @@ if ENABLED:  # pragma: no branch - the environment decides
     from numba import types as _t
     from numba.extending import get_cython_function_address as _address
 
-    from ._smallqr import reflect_rows, reflect_vector, solve_upper
+    from ._smallqr import householder_qr, reflect_rows, reflect_vector, solve_upper
 
     def _external(name: str, nargs: int):
         symbol = f"sotpy_lapack_{name}"
@@ -82,11 +83,8 @@ if ENABLED:  # pragma: no branch - the environment decides
         return _t.ExternalFunction(symbol, _t.void(*([_t.voidptr] * nargs)))
 
     _dgeqp3 = _external("dgeqp3", 9)
-    _dgels = _external("dgels", 11)
     _dgesv = _external("dgesv", 8)
     _dgecon = _external("dgecon", 9)
-
-    _N = ord("N")
 
     @_nb.njit(cache=True, nogil=True)
     def _geqp3(a, jpvt, tau, work, iw):  # pragma: no cover - compiled
@@ -103,24 +101,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         return iw[4]
 
     @_nb.njit(cache=True, nogil=True)
-    def _gels(a, b, work, iw, ch):  # pragma: no cover
-        """Least squares ``min ||a z - b||`` (Fortran ``a``, full column rank), ``z`` in
-        ``b[:ncols]``."""
-        ch[0] = _N
-        iw[0] = a.shape[0]
-        iw[1] = a.shape[1]
-        iw[2] = 1
-        iw[3] = max(a.shape[0], 1)
-        iw[4] = max(b.shape[0], 1)
-        iw[5] = work.shape[0]
-        _dgels(
-            ch[0:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes, a.ctypes,
-            iw[3:].ctypes, b.ctypes, iw[4:].ctypes, work.ctypes, iw[5:].ctypes,
-            iw[6:].ctypes,
-        )  # fmt: skip
-        return iw[6]
-
-    @_nb.njit(cache=True, nogil=True)
     def _equality_stack(A, starts, blocks, fro, lams, rank_tol, last):  # pragma: no cover
         n = A.shape[1] - 1
         p = starts.shape[0] - 1
@@ -131,7 +111,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         nwork = 64 * (max(n, A.shape[0]) + 2)
         work = np.empty(nwork)
         iw = np.zeros(8, dtype=np.int32)
-        ch = np.zeros(3, dtype=np.uint8)
         jpvt = np.zeros(max(n, A.shape[0]), dtype=np.int32)
         tau = np.empty(max(n, 1))
         nokeep = np.empty((0, 0)).T  # (R not wanted)
@@ -151,7 +130,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 for k in range(k0 + 1, k1):
                     scale = min(scale, fro[k])
                 r = _step(A[s0:s1], W, c0, scale, rank_tol, 0.0, k1 - 1 != last, True,
-                          work, iw, ch, jpvt, tau, nokeep)  # fmt: skip
+                          work, iw, jpvt, tau, nokeep)  # fmt: skip
                 if r >= 0:
                     for k in range(k0, k1):
                         ranks[k] = starts[k + 1] - starts[k]
@@ -164,7 +143,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 if s1 == s0:
                     continue
                 r = _step(A[s0:s1], W, c0, fro[k], rank_tol, lams[k], k != last, False,
-                          work, iw, ch, jpvt, tau, nokeep)  # fmt: skip
+                          work, iw, jpvt, tau, nokeep)  # fmt: skip
                 ranks[k] = r
                 if k != last:
                     c0 += r
@@ -172,7 +151,7 @@ if ENABLED:  # pragma: no branch - the environment decides
 
     @_nb.njit(cache=True, nogil=True)
     def _step(
-        rows, W, c0, scale, rank_tol, lam, need, full_only, work, iw, ch, jpvt, tau, keep
+        rows, W, c0, scale, rank_tol, lam, need, full_only, work, iw, jpvt, tau, keep
     ):  # pragma: no cover
         """One step of :meth:`NullspaceStepper.step` on ``W`` (see there). Returns the
         rank, or -1 (nothing changed) when ``full_only`` and the rank is short. The
@@ -231,7 +210,10 @@ if ENABLED:  # pragma: no branch - the environment decides
             if lam > 0.0:
                 for j in range(r):
                     L[m + j, j] = lam
-            _gels(L, rhs, work, iw, ch)
+            tl = np.empty(r)  # least squares by a QR of L (full column rank)
+            householder_qr(L, tl)
+            reflect_vector(L, tl, r, rhs, True)
+            solve_upper(L, r, rhs, False)
             z = rhs[:r].copy()
         if need and c0 == 0:
             # W = I (no step yet): Z Q = Q, of which only the null-space columns
@@ -360,7 +342,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         m_all = A.shape[0]
         work = np.empty(64 * (max(n, m_all) + 2))
         iw = np.zeros(8, dtype=np.int32)
-        ch = np.zeros(3, dtype=np.uint8)
         jpvt = np.zeros(max(n, m_all, 1), dtype=np.int32)
         tau = np.empty(max(n, 1))
         keep = np.zeros((max(m_all, 1), max(m_all, 1))).T
@@ -377,7 +358,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 r = -1
                 if n - c0 > 0 and s1 > s0:
                     r = _step(A[s0:s1], W, c0, scale, rank_tol, 0.0, need, True,
-                              work, iw, ch, jpvt, tau, keep)  # fmt: skip
+                              work, iw, jpvt, tau, keep)  # fmt: skip
                 if r >= 0:
                     if judge:
                         _dual_level(A[s0:s1], W, c0, r if need else -1, keep, jpvt, D,
@@ -394,7 +375,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 r = 0
                 if n - c0 > 0 and s1 > s0:
                     r = _step(A[s0:s1], W, c0, fro[kk], rank_tol, 0.0, need, False,
-                              work, iw, ch, jpvt, tau, keep)  # fmt: skip
+                              work, iw, jpvt, tau, keep)  # fmt: skip
                 ranks[kk] = r
                 if judge:
                     _dual_level(A[s0:s1], W, c0, r if need else -1, keep, jpvt, D, alive,

@@ -8,8 +8,8 @@ argument checks, the workspace and block-size queries, and one level-2 BLAS call
 work has evicted LAPACK's code and data from the caches, more still. The box path's
 compiled call (:mod:`._boxkkt`) made ten such calls a tick on Talos (QRs of 17 x 6 and
 32 x 11, ``Q^T`` of 17 x 33, two ``dtrcon``, triangular solves); it now makes none, and
-the equality recursion (:mod:`._eqkernel`) keeps only ``dgeqp3`` and ``dgels`` (the
-measurements are in ``docs/solvers.md``).
+the equality recursion (:mod:`._eqkernel`) keeps only ``dgeqp3`` (the measurements
+are in ``docs/solvers.md``).
 
 The storage is LAPACK's (``dgeqrf``): for a Fortran ``a`` (``m x k``, ``m >= k``),
 ``R`` on and above the diagonal, reflector ``i`` below it, with ``v_i = [0, ..., 0, 1,

@@ -50,9 +50,8 @@ rows that conflict within a level are solved in the least-squares sense, exactly
 Solution paths
 --------------
 * equality-only stacks: a reduced null-space recursion with LAPACK called directly
-  (``dgeqp3``, ``dormqr``, ``dtrtrs``/``dgels``; compiled, :mod:`._eqkernel`, the
-  reflections and triangular solves are loops of :mod:`._smallqr`) and preallocated
-  buffers; undamped
+  (``dgeqp3``, ``dormqr``, ``dtrtrs``/``dgels``; compiled, :mod:`._eqkernel`, all
+  but ``dgeqp3`` are loops of :mod:`._smallqr`) and preallocated buffers; undamped
   runs of levels found of full row rank at the previous call are factored as one block
   (split again if one of them lost rank);
 * a first level that is a box (each row bounds one variable: the SOT's joint limits),
