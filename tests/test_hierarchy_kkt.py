@@ -12,7 +12,7 @@ import pytest
 
 import sotpy.solvers.hierarchy as hierarchy
 from reference_hierarchy import cascade_hierarchy, projector_hierarchy
-from sotpy.solvers import HierarchySolver, _eqkernel
+from sotpy.solvers import HierarchySolver, _boxkkt
 from sotpy.solvers._kkt import RCOND_MIN, kkt_solve
 
 
@@ -152,11 +152,11 @@ def test_refused_shape_is_not_retried_every_call(kkt_calls):
     assert kkt_calls["refused"] <= 2 and kkt_calls["ok"] == 0
 
 
-@pytest.mark.skipif(_eqkernel.kkt is None, reason="numba missing or SOTPY_JIT=0")
+@pytest.mark.skipif(_boxkkt.kkt is None, reason="numba missing or SOTPY_JIT=0")
 @pytest.mark.parametrize("seed", range(6))
 def test_compiled_kkt_equals_numpy(seed):
-    """The compiled assembly + dgesv + dgecon gives the NumPy path's answer, refusals
-    included (a singular system, an ill-conditioned one)."""
+    """The compiled null-space solve gives the NumPy path's answer (the assembled
+    system by dgesv), refusals included (a singular system, an ill-conditioned one)."""
     rng = np.random.default_rng(300 + seed)
     n = int(rng.integers(8, 20))
     upper = rng.standard_normal((int(rng.integers(1, 5)), n + 1))
@@ -176,3 +176,11 @@ def test_compiled_kkt_equals_numpy(seed):
     near = np.vstack([upper, upper[:1] + 1e-13 * rng.standard_normal(n + 1)])
     assert kkt_solve(near, last, n, fixed, values, compiled=True) is None
     assert kkt_solve(near, last, n, fixed, values, compiled=False) is None
+    if last is not None:  # fewer last-level rows than the directions left: singular
+        short = last[: n - len(fixed) - len(upper) - 1]
+        assert kkt_solve(upper, short, n, fixed, values, compiled=True) is None
+        assert kkt_solve(upper, short, n, fixed, values, compiled=False) is None
+    # more upper rows than free variables: singular
+    crowded = rng.standard_normal((n - len(fixed) + 1, n + 1))
+    assert kkt_solve(crowded, last, n, fixed, values, compiled=True) is None
+    assert kkt_solve(crowded, last, n, fixed, values, compiled=False) is None

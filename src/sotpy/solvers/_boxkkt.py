@@ -76,6 +76,7 @@ from .._jit import ENABLED
 box_kkt = None
 lane = None
 free_lane = None
+kkt = None
 _compiled = None  # the kernel itself (box_kkt may be wrapped, e.g. by a test's spy)
 _warm: list[bool] = []
 
@@ -518,7 +519,52 @@ if ENABLED:  # pragma: no branch - the environment decides
             return LEFT, x_aug, res, ranks, fro, 0.0
         return OK, x_aug, res, ranks, fro, xnorm
 
+    @_nb.njit(cache=True, nogil=True)
+    def _kkt(rows, m_upper, has_last, n, fixed, values, rcond_min):  # pragma: no cover
+        """:func:`._kkt.kkt_solve` by the null-space method of the module doc: ``rows``
+        the upper rows ``[U | -d]`` (the first ``m_upper``) then, with ``has_last``,
+        the last level's ``[L | -c]``; ``fixed`` the fixed variables, at ``values``.
+        Returns ``(ok, solution)``, the solution ``[x; mu_W; mu_U]`` (the KKT
+        system's unknowns, :mod:`._kkt`); not ``ok`` (refused, nothing solved) when
+        the KKT system is singular or ill-conditioned by the module doc's conditions:
+        more upper rows than free variables, fewer last-level rows than the
+        directions they leave, ``rcond(R)`` or ``rcond(L Q_2)^2`` below
+        ``rcond_min``."""
+        w = fixed.shape[0]
+        ml = rows.shape[0] - m_upper if has_last else 0
+        held = np.zeros(n, dtype=np.bool_)
+        for i in range(w):
+            held[fixed[i]] = True
+        nf = n - w
+        F = np.empty(nf, dtype=np.int64)
+        b = 0
+        for j in range(n):
+            if not held[j]:
+                F[b] = j
+                b += 1
+        sol = np.zeros(n + w + m_upper)
+        if m_upper > nf or (has_last and ml < nf - m_upper):
+            return False, sol
+        x_aug = np.ones(n + 1)
+        g = np.empty(n)
+        muU = np.zeros(max(m_upper, 1))
+        if not _general_solve(
+            rows, 0, m_upper, m_upper, ml, not has_last, fixed, values, F, x_aug, g, muU,
+            rcond_min,
+        ):  # fmt: skip
+            return False, sol
+        sol[:n] = x_aug[:n]
+        for i in range(w):  # mu_W = -(g_W + U_W^T mu_U)
+            acc = g[fixed[i]]
+            for r in range(m_upper):
+                acc += rows[r, fixed[i]] * muU[r]
+            sol[n + i] = -acc
+        for r in range(m_upper):
+            sol[n + w + r] = muU[r]
+        return np.isfinite(sol).all(), sol
+
     box_kkt = _compiled = _box_kkt
+    kkt = _kkt
     lane = _lane
     free_lane = _free_lane
 
@@ -550,6 +596,7 @@ def warm_up() -> None:
         np.array([0, 0, n], dtype=np.int64), np.array([[1, 2]], dtype=np.int64), 1e-9,
         1e-9, 1,
     )  # fmt: skip
-    for fn in (_compiled, _lane, _free_lane):
+    _kkt(A, n, True, n, np.zeros(1, dtype=np.int64), np.zeros(1), 1e-9)
+    for fn in (_compiled, _lane, _free_lane, _kkt):
         fn.disable_compile()
     _warm.append(True)

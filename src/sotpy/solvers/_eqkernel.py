@@ -28,7 +28,6 @@ SOLVED, NONFINITE_MATRIX, NONFINITE_RESULT = 0, 1, 2
 equality_stack = None
 equality_all = None
 box_steps = None
-kkt = None
 residuals = None
 box_update = None
 bounds_prepare = None
@@ -51,7 +50,6 @@ def warm_up() -> None:
     # the kernels themselves, not the module's names (a test may have wrapped those)
     _equality_all(A, starts, blocks, lams, 1e-9, 1)
     _equality_stack(A, starts, blocks, np.ones(2), lams, 1e-9, 1)
-    _kkt(A[:1], A[1:], True, n, np.zeros(1, dtype=np.int64), np.zeros(1))
     _residuals(A, np.ones(n + 1), starts, np.zeros(n), np.ones(n), True)
     _box_update(  # a column slice of the stacked buffer, as the solver passes it
         A[:, :n], n, n, np.arange(n), np.ones(n), -np.ones(n), np.ones(n), np.zeros(n), np.zeros(n),
@@ -62,8 +60,8 @@ def warm_up() -> None:
                     np.zeros(n, dtype=np.bool_), starts)  # fmt: skip
     _box_steps(A, starts, blocks, np.ones(2), 1e-9, 1, np.zeros(1, dtype=np.int64), np.zeros(1),
                np.ones(1), 1e-10)  # fmt: skip
-    for fn in (_equality_all, _equality_stack, _kkt, _residuals, _box_update, _bounds_prepare,
-               _box_steps):  # fmt: skip
+    kernels = (_equality_all, _equality_stack, _residuals, _box_update, _bounds_prepare, _box_steps)
+    for fn in kernels:
         fn.disable_compile()
     _warm.append(True)
     report_compile("the hierarchical solver kernels", time.perf_counter() - start)
@@ -83,8 +81,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         return _t.ExternalFunction(symbol, _t.void(*([_t.voidptr] * nargs)))
 
     _dgeqp3 = _external("dgeqp3", 9)
-    _dgesv = _external("dgesv", 8)
-    _dgecon = _external("dgecon", 9)
 
     @_nb.njit(cache=True, nogil=True)
     def _geqp3(a, jpvt, tau, work, iw):  # pragma: no cover - compiled
@@ -498,61 +494,6 @@ if ENABLED:  # pragma: no branch - the environment decides
                         acc += B[j, i] * C[i, a]
                     D[j, cols[a]] -= acc
 
-    @_nb.njit(cache=True, nogil=True)
-    def _kkt(upper, last, has_last, n, fixed, values):  # pragma: no cover - compiled
-        """:func:`._kkt.kkt_solve`'s system, assembled and solved (``dgesv``) with its
-        reciprocal condition number (``dgecon``, 1-norm). Returns ``(info, rcond,
-        solution)``."""
-        w = fixed.shape[0]
-        mu = upper.shape[0]
-        size = n + w + mu
-        K = np.zeros((size, size)).T  # Fortran
-        rhs = np.zeros(size)
-        if has_last:
-            L = np.ascontiguousarray(last[:, :n])
-            K[:n, :n] = L.T @ L
-            c = np.ascontiguousarray(last[:, n])
-            rhs[:n] = -(L.T @ c)
-        else:
-            for i in range(n):
-                K[i, i] = 1.0
-        for i in range(w):
-            K[fixed[i], n + i] = 1.0
-            K[n + i, fixed[i]] = 1.0
-            rhs[n + i] = values[i]
-        for r in range(mu):
-            for j in range(n):
-                K[j, n + w + r] = upper[r, j]
-                K[n + w + r, j] = upper[r, j]
-            rhs[n + w + r] = -upper[r, n]
-        anorm = np.zeros(1)
-        for j in range(size):
-            acc = 0.0
-            for i in range(size):
-                acc += abs(K[i, j])
-            anorm[0] = max(anorm[0], acc)
-        iw = np.zeros(8, dtype=np.int32)
-        ipiv = np.zeros(size, dtype=np.int32)
-        iw[0] = size
-        iw[1] = 1
-        iw[2] = max(size, 1)
-        _dgesv(
-            iw[0:].ctypes, iw[1:].ctypes, K.ctypes, iw[2:].ctypes, ipiv.ctypes,
-            rhs.ctypes, iw[2:].ctypes, iw[3:].ctypes,
-        )  # fmt: skip
-        if iw[3] != 0:
-            return iw[3], 0.0, rhs
-        ch = np.zeros(1, dtype=np.uint8)
-        ch[0] = ord("1")
-        rcond = np.zeros(1)
-        work = np.empty(4 * size)
-        iwork = np.empty(size, dtype=np.int32)
-        _dgecon(
-            ch.ctypes, iw[0:].ctypes, K.ctypes, iw[2:].ctypes, anorm.ctypes, rcond.ctypes,
-            work.ctypes, iwork.ctypes, iw[4:].ctypes,
-        )  # fmt: skip
-        return iw[4], rcond[0], rhs
-
     # The two reductions below may sum in any order (``reassoc``: the loops over a row
     # vectorize, twice as fast). Only the rounding of a norm changes; NaN and inf
     # propagate as in any order (no ``nnan``/``ninf``), and every caller gets the same
@@ -690,6 +631,5 @@ if ENABLED:  # pragma: no branch - the environment decides
     equality_all = _equality_all
     box_steps = _box_steps
     bounds_prepare = _bounds_prepare
-    kkt = _kkt
     residuals = _residuals
     box_update = _box_update
