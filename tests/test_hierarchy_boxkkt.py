@@ -465,7 +465,10 @@ def test_posture_split_gives_the_general_solve(seed, shape):
     assert len(_boxkkt._posture_columns(A, split)) == n  # recognised as a posture
     x_g, mu_g, g = np.ones(n + 1), np.zeros(mu_), np.empty(n)
     ml = A.shape[0] - split
-    assert _boxkkt._general_solve(A, s1, split, mu_, ml, False, W, vals, F, x_g, g, mu_g, 1e-9)
+    scratch = _boxkkt._lapack_scratch(n, A.shape[0])
+    assert _boxkkt._general_solve(
+        A, s1, split, mu_, ml, False, W, vals, F, x_g, g, mu_g, 1e-9, *scratch
+    )
     np.testing.assert_allclose(x_p, x_g, atol=1e-11 * (1 + np.abs(x_g).max()))
     np.testing.assert_allclose(mu_p, mu_g, atol=1e-10 * (1 + np.abs(mu_g).max()))
     # and both are the KKT point: upper rows met, stationarity on the free variables

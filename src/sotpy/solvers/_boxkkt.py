@@ -88,8 +88,81 @@ OK, REFUSED, UNDECIDED, NOT_CONVERGED, LEFT = 0, 1, 2, 3, 4
 if ENABLED:  # pragma: no branch - the environment decides
     import numba as _nb
 
-    from ._eqkernel import _bounds, _box_update, _equality_stack, _residuals
+    from ._eqkernel import _bounds, _box_update, _equality_stack, _external, _residuals
     from ._smallqr import householder_qr, rcond_upper, reflect_rows, reflect_vector, solve_upper
+
+    _dgeqrf = _external("dgeqrf", 8)
+    _dormqr = _external("dormqr", 13)
+    _dtrtrs = _external("dtrtrs", 10)
+    _dtrcon = _external("dtrcon", 10)
+    _R, _L, _N, _T, _U, _O = ord("R"), ord("L"), ord("N"), ord("T"), ord("U"), ord("1")
+
+    @_nb.njit(cache=True, nogil=True)
+    def _geqrf(a, tau, work, iw):  # pragma: no cover - compiled
+        """QR in place of the Fortran array ``a`` (no pivoting)."""
+        iw[0] = a.shape[0]
+        iw[1] = a.shape[1]
+        iw[2] = max(a.shape[0], 1)
+        iw[3] = work.shape[0]
+        _dgeqrf(
+            iw[0:].ctypes, iw[1:].ctypes, a.ctypes, iw[2:].ctypes, tau.ctypes,
+            work.ctypes, iw[3:].ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _rcond_upper(a, k, work, iwork, iw, ch):  # pragma: no cover - compiled
+        """Reciprocal condition number (1-norm estimate) of the upper triangle of the
+        leading ``k x k`` block of the Fortran array ``a``."""
+        ch[0] = _O
+        ch[1] = ord("U")
+        ch[2] = _N
+        iw[0] = k
+        iw[1] = max(a.shape[0], 1)
+        rc = np.zeros(1)
+        _dtrcon(
+            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, a.ctypes,
+            iw[1:].ctypes, rc.ctypes, work.ctypes, iwork.ctypes, iw[2:].ctypes,
+        )  # fmt: skip
+        if iw[2] != 0:
+            return 0.0
+        return rc[0]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _ormqr(side, trans, refl, k, tau, c, work, iw, ch):  # pragma: no cover
+        """``c <- op(Q) c`` or ``c op(Q)`` (Fortran ``c``), ``Q`` from ``k`` reflectors
+        in the columns of the Fortran array ``refl``."""
+        ch[0] = side
+        ch[1] = trans
+        iw[0] = c.shape[0]
+        iw[1] = c.shape[1]
+        iw[2] = k
+        iw[3] = max(refl.shape[0], 1)
+        iw[5] = max(c.shape[0], 1)
+        iw[6] = work.shape[0]
+        _dormqr(
+            ch[0:].ctypes, ch[1:].ctypes, iw[0:].ctypes, iw[1:].ctypes, iw[2:].ctypes,
+            refl.ctypes, iw[3:].ctypes, tau.ctypes, c.ctypes, iw[5:].ctypes,
+            work.ctypes, iw[6:].ctypes, iw[7:].ctypes,
+        )  # fmt: skip
+        return iw[7]
+
+    @_nb.njit(cache=True, nogil=True)
+    def _trtrs_upper(a, n, trans, b, iw, ch):  # pragma: no cover
+        """``op(U) z = b`` in place of ``b`` (length ``n``), ``U`` the upper triangle of
+        the leading ``n x n`` block of the Fortran array ``a``."""
+        ch[0] = _U
+        ch[1] = trans
+        ch[2] = _N
+        iw[0] = n
+        iw[1] = 1
+        iw[2] = max(a.shape[0], 1)
+        iw[3] = max(n, 1)
+        _dtrtrs(
+            ch[0:].ctypes, ch[1:].ctypes, ch[2:].ctypes, iw[0:].ctypes, iw[1:].ctypes,
+            a.ctypes, iw[2:].ctypes, b.ctypes, iw[3:].ctypes, iw[4:].ctypes,
+        )  # fmt: skip
+        return iw[4]
 
     @_nb.njit(cache=True, nogil=True)
     def _posture_columns(A, split):  # pragma: no cover - compiled
@@ -232,14 +305,25 @@ if ENABLED:  # pragma: no branch - the environment decides
                 g[j] += e * A[row, j]
 
     @_nb.njit(cache=True, nogil=True)
+    def _lapack_scratch(n, m):  # pragma: no cover - compiled
+        """The workspaces of :func:`_general_solve`'s LAPACK calls (``n`` variables,
+        ``m`` rows)."""
+        return (
+            np.empty(64 * (n + m + 2)),
+            np.empty(max(n, 1), dtype=np.int32),
+            np.zeros(8, dtype=np.int32),
+            np.zeros(3, dtype=np.uint8),
+        )
+
+    @_nb.njit(cache=True, nogil=True)
     def _general_solve(
-        A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU, rcond_min
-    ):  # pragma: no cover - compiled
+        A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
+        rcond_min, work, iwork, iw, ch,
+    ):  # fmt: skip  # pragma: no cover - compiled
         """The solve of the module doc for any last level (or the minimum norm when
         ``minnorm``): ``x_aug``, the gradient ``g`` and the upper rows' multipliers
         ``muU`` written in place. ``False`` (refused) when ``R`` or ``L Q_2`` is
-        ill-conditioned. The caller ensures ``m_U <= |F|`` and, unless ``minnorm``,
-        ``m_L >= |F| - m_U``."""
+        ill-conditioned."""
         n = A.shape[1] - 1
         w = W.shape[0]
         nf = F.shape[0]
@@ -254,59 +338,66 @@ if ENABLED:  # pragma: no branch - the environment decides
             y[r] = acc
             for i in range(nf):
                 Ut[i, r] = A[row, F[i]]
-        tau = np.empty(max(mu_, 1))
+        kq = min(nf, mu_)
+        tau = np.empty(max(kq, 1))
         if mu_ > 0:
-            householder_qr(Ut, tau)
-            if not rcond_upper(Ut, mu_) >= rcond_min:
+            if _geqrf(Ut, tau[:kq], work, iw) != 0:
                 return False
-            solve_upper(Ut, mu_, y, True)  # R^T y_1 = d
+            if not _rcond_upper(Ut, mu_, work, iwork, iw, ch) >= rcond_min:
+                return False
+            y1 = y[:mu_]
+            _trtrs_upper(Ut, mu_, _T, y1, iw, ch)  # R^T y_1 = d
         if not minnorm:
             k2 = nf - mu_
             # B = L_F (m_L x nf, Fortran) and c = b_L - L_W x_W
             B = np.empty((nf, ml)).T
-            c = np.empty(ml)
+            c = np.empty((1, ml)).T
             for r in range(ml):
                 row = split + r
                 acc = -A[row, n]
                 for i in range(w):
                     acc -= A[row, W[i]] * vals[i]
-                c[r] = acc
+                c[r, 0] = acc
                 for i in range(nf):
                     B[r, i] = A[row, F[i]]
-            if mu_ > 0:  # B <- L_F Q, as (L_F Q)^T = Q^T L_F^T on the C-order view B.T
-                reflect_rows(Ut, tau, mu_, B.T, np.empty(ml), True)
+            if mu_ > 0:
+                _ormqr(_R, _N, Ut, kq, tau[:kq], B, work, iw, ch)  # B <- L_F Q
             for r in range(ml):
-                acc = c[r]
+                acc = c[r, 0]
                 for i in range(mu_):
                     acc -= B[r, i] * y[i]
-                c[r] = acc
+                c[r, 0] = acc
             if k2 > 0:
                 B2 = np.asfortranarray(B[:, mu_:])
                 tau2 = np.empty(k2)
-                householder_qr(B2, tau2)
-                rc = rcond_upper(B2, k2)
+                if _geqrf(B2, tau2, work, iw) != 0:
+                    return False
+                rc = _rcond_upper(B2, k2, work, iwork, iw, ch)
                 if not rc * rc >= rcond_min:
                     return False
-                reflect_vector(B2, tau2, k2, c, True)  # c <- Q_2'^T c
-                solve_upper(B2, k2, c, False)
-                y[mu_:] = c[:k2]
+                _ormqr(_L, _T, B2, k2, tau2, c, work, iw, ch)  # c <- Q_2'^T c
+                y2 = np.ascontiguousarray(c[:k2, 0])
+                _trtrs_upper(B2, k2, _N, y2, iw, ch)
+                y[mu_:] = y2
         # x_F = Q y
-        z = y.copy()
+        z = np.empty((1, nf)).T
+        z[:, 0] = y
         if mu_ > 0:
-            reflect_vector(Ut, tau, mu_, z, False)
+            _ormqr(_L, _N, Ut, kq, tau[:kq], z, work, iw, ch)
         for i in range(w):
             x_aug[W[i]] = vals[i]
         for i in range(nf):
-            x_aug[F[i]] = z[i]
+            x_aug[F[i]] = z[i, 0]
         _gradient(A, split, minnorm, x_aug, g)
         if mu_ > 0:
-            h = np.empty(nf)
+            h = np.empty((1, nf)).T
             for i in range(nf):
-                h[i] = g[F[i]]
-            reflect_vector(Ut, tau, mu_, h, True)
-            solve_upper(Ut, mu_, h, False)
+                h[i, 0] = g[F[i]]
+            _ormqr(_L, _T, Ut, kq, tau[:kq], h, work, iw, ch)
+            mu = np.ascontiguousarray(h[:mu_, 0])
+            _trtrs_upper(Ut, mu_, _N, mu, iw, ch)
             for r in range(mu_):
-                muU[r] = -h[r]
+                muU[r] = -mu[r]
         return True
 
     @_nb.njit(cache=True, nogil=True)
@@ -349,6 +440,7 @@ if ENABLED:  # pragma: no branch - the environment decides
         m = A.shape[0]
         n = A.shape[1] - 1
         x_aug = np.ones(n + 1)
+        work, iwork, iw, ch = _lapack_scratch(n, m)
         res = np.zeros(starts.shape[0] - 1)
         row_of = _posture_columns(A, split)
         for it in range(max_iter):
@@ -390,8 +482,9 @@ if ENABLED:  # pragma: no branch - the environment decides
             if posture:
                 _gradient(A, split, minnorm, x_aug, g)
             elif not _general_solve(
-                A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU, rcond_min
-            ):
+                A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
+                rcond_min, work, iwork, iw, ch,
+            ):  # fmt: skip
                 return REFUSED, x_aug, res, minnorm, nf, mu_, it
             release = -1
             if w > 0:
@@ -548,9 +641,10 @@ if ENABLED:  # pragma: no branch - the environment decides
         x_aug = np.ones(n + 1)
         g = np.empty(n)
         muU = np.zeros(max(m_upper, 1))
+        work, iwork, iw, ch = _lapack_scratch(n, rows.shape[0])
         if not _general_solve(
             rows, 0, m_upper, m_upper, ml, not has_last, fixed, values, F, x_aug, g, muU,
-            rcond_min,
+            rcond_min, work, iwork, iw, ch,
         ):  # fmt: skip
             return False, sol
         sol[:n] = x_aug[:n]
