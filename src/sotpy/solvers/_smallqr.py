@@ -68,7 +68,36 @@ if ENABLED:  # pragma: no branch - the environment decides
                 a[r, i] *= scale
             a[i, i] = beta
             ti = tau[i]
-            for j in range(i + 1, k):  # H_i a[i:, j]
+            # H_i a[i:, j], four columns at a time: four independent sums per row
+            # instead of one dependency chain per column
+            j = i + 1
+            while j + 3 < k:
+                s0 = a[i, j]
+                s1 = a[i, j + 1]
+                s2 = a[i, j + 2]
+                s3 = a[i, j + 3]
+                for r in range(i + 1, m):
+                    v = a[r, i]
+                    s0 += v * a[r, j]
+                    s1 += v * a[r, j + 1]
+                    s2 += v * a[r, j + 2]
+                    s3 += v * a[r, j + 3]
+                s0 *= ti
+                s1 *= ti
+                s2 *= ti
+                s3 *= ti
+                a[i, j] -= s0
+                a[i, j + 1] -= s1
+                a[i, j + 2] -= s2
+                a[i, j + 3] -= s3
+                for r in range(i + 1, m):
+                    v = a[r, i]
+                    a[r, j] -= s0 * v
+                    a[r, j + 1] -= s1 * v
+                    a[r, j + 2] -= s2 * v
+                    a[r, j + 3] -= s3 * v
+                j += 4
+            while j < k:
                 s = a[i, j]
                 for r in range(i + 1, m):
                     s += a[r, i] * a[r, j]
@@ -76,6 +105,7 @@ if ENABLED:  # pragma: no branch - the environment decides
                 a[i, j] -= s
                 for r in range(i + 1, m):
                     a[r, j] -= s * a[r, i]
+                j += 1
 
     @_nb.njit(cache=True, nogil=True, error_model="numpy")
     def reflect_rows(a, tau, k, c, w, trans):  # pragma: no cover - compiled
@@ -157,19 +187,19 @@ if ENABLED:  # pragma: no branch - the environment decides
                 norm_r = s
         col = np.empty(k)
         norm_inv = 0.0
-        for j in range(k):  # column j of R^{-1}: R x = e_j, x[j + 1:] = 0
+        for j in range(k):  # column j of R^{-1}: R x = e_j, x[j + 1:] = 0, by columns
             if a[j, j] == 0.0:
                 return 0.0
             for i in range(j + 1):
                 col[i] = 0.0
-            col[j] = 1.0 / a[j, j]
-            s = abs(col[j])
-            for i in range(j - 1, -1, -1):
-                acc = 0.0
-                for r in range(i + 1, j + 1):
-                    acc += a[i, r] * col[r]
-                col[i] = -acc / a[i, i]
-                s += abs(col[i])
+            col[j] = 1.0
+            s = 0.0
+            for i in range(j, -1, -1):
+                xi = col[i] / a[i, i]
+                col[i] = xi
+                s += abs(xi)
+                for r in range(i):  # col[:i] -= x_i R[:i, i] (a column of a)
+                    col[r] -= xi * a[r, i]
             if not s <= norm_inv:
                 norm_inv = s
         rc = 1.0 / (norm_r * norm_inv)
