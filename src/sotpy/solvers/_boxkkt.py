@@ -17,24 +17,19 @@ variables moved to the right-hand sides ``d`` and ``c``):
 
     \min_{x_F} \tfrac12 \|L x_F - c\|^2 \quad \text{s.t.} \quad U x_F = d
 
-by the null-space method: ``U^T = Q [R; 0]`` (Householder QR), ``x_F = Q [y_1; y_2]``
-with ``R^T y_1 = d`` and ``y_2`` the least-squares solution of ``(L Q_2) y_2 = c - L Q_1
-y_1`` (a QR of ``L Q_2``; ``L Q`` by the reflectors). When every level fits in the free
+by the null-space method: ``U^T = Q [R; 0]`` (``dgeqrf``), ``x_F = Q [y_1; y_2]`` with
+``R^T y_1 = d`` and ``y_2`` the least-squares solution of ``(L Q_2) y_2 = c - L Q_1 y_1``
+(``dgeqrf`` of ``L Q_2``; ``L Q`` by ``dormqr``). When every level fits in the free
 directions (``m_U + m_L <= |F|``) all of them go into ``U`` and the point is the
 minimum-norm solution ``x_F = Q_1 R^{-T} d``. Either way the answer is the unique
 lexicographic optimum with ``W`` fixed when ``R`` (``U`` of full row rank) and ``L Q_2``
 (``L`` of full column rank on the null space of ``U``) are well conditioned; the call is
 refused otherwise (the null-space recursion's rank threshold decides then). The
-conditions, with the exact 1-norm reciprocal condition number of the triangular
-factors: ``rcond(R) >= RCOND_MIN`` and ``rcond(L Q_2)^2 >= RCOND_MIN`` (the reduced
-Hessian ``(L Q_2)^T (L Q_2)`` is what the one-system KKT solve of :mod:`._kkt`
-conditions on), with :data:`._kkt.RCOND_MIN`.
-
-The QRs, the products with ``Q``, the triangular solves and the condition numbers are
-those of :mod:`._smallqr`, compiled loops inside the call: at these sizes a LAPACK call
-costs more in fixed overhead than in flops, the more so inside a control tick. Its
-``rcond`` comes from the triangle's inverse; it is never above LAPACK's estimate
-(``dtrcon``), so a call refuses a little sooner than with it, never later.
+conditions, with LAPACK's 1-norm estimate ``dtrcon``: ``rcond(R) >= RCOND_MIN`` and
+``rcond(L Q_2)^2 >= RCOND_MIN`` (the reduced Hessian ``(L Q_2)^T (L Q_2)`` is what the
+one-system KKT solve of :mod:`._kkt` conditions on), with :data:`._kkt.RCOND_MIN`. The
+same solve, on rows given apart, is the compiled KKT solve of :mod:`._kkt`
+(:func:`kkt`).
 
 The SOT's last level is usually a posture: rows of the identity on joint variables
 (:func:`_posture_columns` recognises them). Then, with ``P`` the free variables with a
@@ -58,7 +53,13 @@ when ``rcond(R_N)^2 >= RCOND_MIN`` and ``rcond(R_M) >= RCOND_MIN``, the same pai
 conditions, and else leaves the iteration to the general solve (so the call refuses no
 shape it answered before). For Talos (17 upper rows, 6 free-flyer and 31 free joint
 variables) that is two QR of 17 x 6 and 31 x 11 and one ``Q_N^T`` applied to 17 x 32,
-against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37.
+against the general solve's QR of 37 x 17 and ``L Q`` of 32 x 37. At these sizes the
+split does its QRs, products, triangular solves and condition numbers with
+:mod:`._smallqr` rather than LAPACK (whose fixed cost per call dominates there); its
+``rcond`` is the exact 1-norm one, from the small triangle's inverse, never above
+``dtrcon``'s estimate, so the split refuses a little sooner, never later. The general
+solve, whose QR reaches 38 x 32 (a posture alone, minimum norm), stays on LAPACK's
+blocked kernels, faster there.
 
 The multipliers: with ``g`` the gradient of the last objective at ``x`` (``L^T (L x -
 c)``, or ``x`` for the minimum norm), ``U_F^T \mu_U = -g_F`` gives ``\mu_U = -R^{-1}

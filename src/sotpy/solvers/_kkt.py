@@ -29,11 +29,11 @@ Two ways to the same solution. Compiled (numba), by the null-space method of
 :mod:`._boxkkt` (:func:`._boxkkt.kkt`): the fixed variables moved to the right-hand
 sides, a QR of ``U_F^T``, a QR of ``L_F Q_2``, the multipliers from ``R``; about a
 third of the flops of the assembled system (on the active benchmark stack, ``n = 40``,
-8 fixed variables, 25 upper and 34 last rows, the active-set solve went from 386 to
-255-280 µs median). Without numba, the system assembled and solved by ``dgesv``. The
+8 fixed variables, 25 upper and 34 last rows, the active-set solve went from 384 to
+304-310 µs median). Without numba, the system assembled and solved by ``dgesv``. The
 solve is used only when it is well conditioned, so that the answer is accurate to about
 ``1e-16 / RCOND_MIN`` relative: compiled, ``rcond(R) >= RCOND_MIN`` and ``rcond(L_F
-Q_2)^2 >= RCOND_MIN`` (the exact 1-norm ``rcond`` of the triangular factors: ``U``
+Q_2)^2 >= RCOND_MIN`` (``dtrcon``'s 1-norm estimates for the triangular factors: ``U``
 far from rank deficiency, and the reduced Hessian ``(L_F Q_2)^T (L_F Q_2)`` too); with
 NumPy, the assembled matrix's reciprocal condition number (``dgecon``, 1-norm) at least
 :data:`RCOND_MIN`. Otherwise (a level close to rank deficiency, a singular

@@ -6,10 +6,11 @@ Below a few dozen rows a LAPACK call costs more in fixed overhead than in flops:
 argument checks, the workspace and block-size queries, and one level-2 BLAS call
 (``dgemv``, ``dger``) per reflector and column block; inside a control tick, whose other
 work has evicted LAPACK's code and data from the caches, more still. The box path's
-compiled call (:mod:`._boxkkt`) made ten such calls a tick on Talos (QRs of 17 x 6 and
+posture split (:mod:`._boxkkt`) made ten such calls a tick on Talos (QRs of 17 x 6 and
 32 x 11, ``Q^T`` of 17 x 33, two ``dtrcon``, triangular solves); it now makes none, and
-the equality recursion (:mod:`._eqkernel`) keeps only ``dgeqp3`` (the measurements
-are in ``docs/solvers.md``).
+the equality recursion (:mod:`._eqkernel`) keeps only ``dgeqp3``. Larger
+factorisations (the general box solve's, up to 38 x 32) stay with LAPACK's blocked
+kernels, which win there (the measurements are in ``docs/solvers.md``).
 
 The storage is LAPACK's (``dgeqrf``): for a Fortran ``a`` (``m x k``, ``m >= k``),
 ``R`` on and above the diagonal, reflector ``i`` below it, with ``v_i = [0, ..., 0, 1,
