@@ -441,7 +441,6 @@ if ENABLED:  # pragma: no branch - the environment decides
         m = A.shape[0]
         n = A.shape[1] - 1
         x_aug = np.ones(n + 1)
-        work, iwork, iw, ch = _lapack_scratch(n, m)
         res = np.zeros(starts.shape[0] - 1)
         row_of = _posture_columns(A, split)
         for it in range(max_iter):
@@ -482,9 +481,9 @@ if ENABLED:  # pragma: no branch - the environment decides
                 posture = _posture_solve(A, s1, mp, row_of, W, vals, F, x_aug, muU, rcond_min)
             if posture:
                 _gradient(A, split, minnorm, x_aug, g)
-            elif not _general_solve(
+            elif not _general_solve(  # (LAPACK's workspaces only on this branch)
                 A, s1, split, mu_, ml, minnorm, W, vals, F, x_aug, g, muU,
-                rcond_min, work, iwork, iw, ch,
+                rcond_min, *_lapack_scratch(n, m),
             ):  # fmt: skip
                 return REFUSED, x_aug, res, minnorm, nf, mu_, it
             release = -1
