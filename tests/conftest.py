@@ -1,14 +1,87 @@
-"""Shared fixtures: every test starts and ends with an empty pool at tick 0."""
+"""Shared fixtures and the ``needs`` marker.
+
+- Every test starts and ends with an empty pool at tick 0.
+- ``@pytest.mark.needs("dot")`` (or ``"chromium"``, ``"sphinx"``): the test needs a
+  program that ``pip install -e '.[test]'`` does not bring (Graphviz's ``dot``, a
+  headless Chromium, the documentation tools of the ``docs`` extra); it is skipped,
+  with the reason and the install command, where that program is missing. Set
+  ``SOTPY_TEST_REQUIRE=dot,chromium,sphinx`` (what ``.ci/run`` does once it has
+  installed them) to make such a test fail instead of skipping, so that a run that
+  promised them cannot pass without running those tests.
+"""
 
 from __future__ import annotations
 
 import importlib.util
+import os
+import shutil
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from sotpy.graph.pool import pool
+
+
+def _chromium() -> str | None:
+    from sotpy.viewer import findChromium
+
+    return findChromium()
+
+
+def _sphinx() -> str | None:
+    found = all(importlib.util.find_spec(m) is not None for m in ("sphinx", "myst_parser"))
+    return "sphinx" if found else None
+
+
+#: What a ``needs`` marker may name: a finder (the program's path, or None when it is
+#: missing) and how to install it.
+PROGRAMS: dict[str, tuple[Callable[[], str | None], str]] = {
+    "dot": (lambda: shutil.which("dot"), "Graphviz's 'dot' (apt-get install graphviz)"),
+    "chromium": (_chromium, "Chromium (bash tools/install-browser.sh)"),
+    "sphinx": (_sphinx, "Sphinx and myst-parser (pip install -e '.[docs]')"),
+}
+
+
+def missing_programs(names: tuple[str, ...]) -> list[str]:
+    """The programs of ``names`` that are not installed here, each as its install hint."""
+    out = []
+    for name in names:
+        if name not in PROGRAMS:
+            raise pytest.UsageError(f"needs({name!r}): unknown program; known: {list(PROGRAMS)}")
+        find, hint = PROGRAMS[name]
+        if find() is None:
+            out.append(hint)
+    return out
+
+
+def required_programs() -> set[str]:
+    """The programs ``SOTPY_TEST_REQUIRE`` (comma-separated) says must be there."""
+    text = os.environ.get("SOTPY_TEST_REQUIRE", "")
+    return {p.strip() for p in text.split(",") if p.strip()}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "needs(*programs): skip unless the programs are installed (dot, chromium, sphinx); "
+        "fail instead when SOTPY_TEST_REQUIRE names them",
+    )
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    names = tuple(n for mark in item.iter_markers("needs") for n in mark.args)
+    if not names:
+        return
+    missing = missing_programs(names)
+    if not missing:
+        return
+    required = required_programs() & set(names)
+    text = f"needs {', '.join(missing)}"
+    if any(PROGRAMS[n][1] in missing for n in required):
+        pytest.fail(f"{text}, which SOTPY_TEST_REQUIRE={sorted(required)} requires", False)
+    pytest.skip(text)
 
 
 @pytest.fixture(autouse=True)

@@ -363,7 +363,8 @@ def test_unknown_key_is_an_error_listing_the_keys():
 
 
 def test_dynamics_does_not_import_tasks():
-    """DESIGN.md's layers: loading a robot imports no task module; robot.tasks does."""
+    """The layers of docs/architecture.md: loading a robot imports no task module;
+    robot.tasks does."""
     code = (
         "import sys\n"
         "from sotpy.dynamics import load_robot\n"

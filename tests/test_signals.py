@@ -1,7 +1,7 @@
 """Signals: names, lazy evaluation at the pool's tick, the outdated rule, constants,
 type conversion, unplugged inputs, plugs (refusals leave the graph unchanged) and
-deep chains. Each test asserts behaviour documented in ``sotpy.graph.signal`` or in
-DESIGN.md ("Data-flow semantics")."""
+deep chains. Each test asserts behaviour documented in ``sotpy.graph.signal``, in
+docs/graph.md or in docs/architecture.md ("One tick")."""
 
 from __future__ import annotations
 

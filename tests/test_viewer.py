@@ -24,7 +24,7 @@ import pytest
 import sotpy.viewer as viewer_module
 from sotpy.errors import EntityError, SignalTypeError, SotpyError, SotpyWarning
 from sotpy.graph import VECTOR, Entity, Output, PeriodicCall, plug, pool
-from sotpy.viewer import RobotViewer, findChromium
+from sotpy.viewer import RobotViewer
 
 
 class ViewerTestSource(Entity):
@@ -425,7 +425,7 @@ def test_cost_per_tick_seen_by_the_loop_on_talos(viewers, talos):
     assert cost < 1e-3
 
 
-@pytest.mark.skipif(findChromium() is None, reason="no Chromium: run tools/install-browser.sh")
+@pytest.mark.needs("chromium")
 def test_page_renders_talos_at_half_sitting(viewers, talos, tmp_path):
     from matplotlib.image import imread
 

@@ -119,7 +119,7 @@ def test_writeGraph_writes_dot_text(tmp_path):
     assert pool.writeGraph(str(tmp_path / "again.dot")).endswith("again.dot")
 
 
-@pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz 'dot' is not installed")
+@pytest.mark.needs("dot")
 def test_writeGraph_renders_svg_with_graphviz(tmp_path):
     _graph()
     sot = DotSolver("sot")

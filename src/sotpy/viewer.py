@@ -641,12 +641,12 @@ def _shape(v: Any) -> str:
 # Headless Chromium
 # ---------------------------------------------------------------------------------------
 def findChromium() -> str | None:
-    """The path of a Chromium (or Chrome) executable, or None."""
+    """The path of a Chromium (or Chrome) executable on the PATH, or None."""
     for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
         found = shutil.which(name)
         if found:
             return found
-    return "/usr/bin/chromium" if os.access("/usr/bin/chromium", os.X_OK) else None
+    return None
 
 
 #: Flags of every Chromium run: headless, no sandbox (root in containers), no GPU (WebGL
@@ -690,8 +690,8 @@ def _renderPage(who: str, url: str, width: int, height: int, meshes: int, timeou
     exe = findChromium()
     if exe is None:
         raise SotpyError(
-            f"{who}: no Chromium found (looked for 'chromium' on the PATH and "
-            "/usr/bin/chromium); install it with 'bash tools/install-browser.sh'"
+            f"{who}: no Chromium found (looked for 'chromium', 'chromium-browser' and "
+            "'google-chrome' on the PATH); install it with 'bash tools/install-browser.sh'"
         )
     deadline = time.monotonic() + timeout
     profile = tempfile.mkdtemp(prefix="sotpy-chromium-")

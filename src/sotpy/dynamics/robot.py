@@ -189,7 +189,7 @@ class Robot:
 
         The module is imported here, on first use, not at the top of this file: the
         tasks layer imports the dynamics layer, and the dynamics layer must not import
-        the tasks layer at module level (DESIGN.md), so that loading a robot does not
+        the tasks layer at module level (:doc:`docs/architecture.md </architecture>`), so that loading a robot does not
         need (or create) any task.
         """
         ready = self.__dict__.get("_readyTasks")

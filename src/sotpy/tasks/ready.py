@@ -49,7 +49,7 @@ not collide: the meta-task of key ``k`` is named ``_<prefix>_<k>``, hence the en
 
 This module is imported lazily by :attr:`sotpy.dynamics.robot.Robot.tasks`: the
 dynamics layer must not import the tasks layer at module level (``tasks`` imports
-``dynamics``; DESIGN.md's layers).
+``dynamics``; the layers of :doc:`docs/architecture.md </architecture>`).
 
 The entities of the two tasks SoT did not have
 -------------------------------------------------
