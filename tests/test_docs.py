@@ -31,7 +31,8 @@ RUNNABLE_PAGES = ["tutorial-debugging.md", "porting.md"]
 _FENCE = re.compile(r"^(```|~~~).*?^\1[ \t]*$", re.S | re.M)
 _LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
 _RUNNABLE = re.compile(
-    r"^<!-- test(?:: needs (?P<needs>[\w, -]+))? -->[ \t]*\n```python[ \t]*\n(?P<code>.*?)^```[ \t]*$",
+    r"^<!-- test(?:: needs (?P<needs>[\w, -]+))? -->[ \t]*\n"
+    r"```python[ \t]*\n(?P<code>.*?)^```[ \t]*$",
     re.S | re.M,
 )
 

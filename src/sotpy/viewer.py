@@ -42,6 +42,7 @@ import base64
 import contextlib
 import fcntl
 import json
+import math
 import os
 import re
 import select
@@ -86,6 +87,43 @@ main()
 """
 #: The command that starts a meshcat server.
 _SERVER_COMMAND = [sys.executable, "-u", "-c", _SERVER_MAIN]
+#: meshcat's default perspective camera: vertical field of view, degrees.
+_FOV_DEGREES = 75.0
+#: Where :meth:`RobotViewer.frameRobot` puts the camera from the robot's centre (world
+#: axes; x forward, y left, z up): in front, a little to the left and above.
+_CAMERA_DIRECTION = (1.0, 0.45, 0.35)
+#: Repetitions of a repeated animation (three.js plays a finite number).
+_REPEAT = 1_000_000
+
+
+def _visualBox(
+    model: pin.Model, visual: pin.GeometryModel, q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The world axis-aligned box (lower, upper corners, m) around the visual
+    geometries at ``q``: each geometry's local box (scaled as drawn) at its placement;
+    a geometry without a box counts as its origin. The origin alone if there is none."""
+    data = model.createData()
+    geometry_data = pin.GeometryData(visual)
+    pin.forwardKinematics(model, data, q)
+    pin.updateGeometryPlacements(model, data, visual, geometry_data)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    unit = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    for obj, M in zip(visual.geometryObjects, geometry_data.oMg, strict=True):
+        try:
+            obj.geometry.computeLocalAABB()
+            box = obj.geometry.aabb_local
+            scale = np.asarray(obj.meshScale, dtype=float)
+            a, b = np.asarray(box.min_) * scale, np.asarray(box.max_) * scale
+        except (AttributeError, RuntimeError, TypeError):
+            a = b = np.zeros(3)
+        if not (np.isfinite(a).all() and np.isfinite(b).all()):
+            a = b = np.zeros(3)
+        corners = a + unit * (b - a)
+        world = corners @ M.rotation.T + M.translation
+        lo, hi = np.minimum(lo, world.min(axis=0)), np.maximum(hi, world.max(axis=0))
+    if not np.isfinite(lo).all():
+        return np.zeros(3), np.zeros(3)
+    return lo, hi
 
 
 # ---------------------------------------------------------------------------------------
@@ -398,7 +436,9 @@ class RobotViewer(Entity):
                     stacklevel=2,
                 )
             return self._count
-        sender.submit(np.array(q, dtype=np.float64))
+        q = np.array(q, dtype=np.float64)
+        sender.submit(q)
+        self._lastQ = q
         self._count += 1
         return self._count
 
@@ -420,6 +460,8 @@ class RobotViewer(Entity):
         self._window: Any = None
         self._count = 0
         self._warned = False
+        self._lastQ: np.ndarray | None = None
+        self._centre = np.zeros(3)
         self._io = threading.Lock()  # one ZeroMQ exchange at a time (REQ socket)
         if not isinstance(model, pin.Model):
             raise EntityError(f"{who}: model must be a pinocchio.Model, got {type(model)}")
@@ -437,6 +479,8 @@ class RobotViewer(Entity):
             raise EntityError(f"{who}: timeout must be a positive number of s, got {timeout!r}")
         self.display.setPeriod(period)
         self._nq = model.nq
+        self._model = model
+        self._visual = visual_model
         self._modelName = model.name
         self._timeout = float(timeout)
         self._meshes = len(visual_model.geometryObjects) + (
@@ -554,9 +598,10 @@ class RobotViewer(Entity):
 
     @command
     def setCameraPosition(self, position: np.ndarray) -> None:
-        """Place the browser's camera at ``position`` (world frame, m); it looks at the
-        world origin (meshcat 0.3 cannot move the target) and the user can still turn
-        it with the mouse. meshcat's default is (3, 0, 1)."""
+        """Place the browser's camera at ``position`` (m, world axes) from the point it
+        looks at: the world origin (meshcat 0.3 cannot move that point), or the robot's
+        centre after :meth:`frameRobot`. The user can still turn it with the mouse.
+        meshcat's default is (3, 0, 1)."""
         self._checkOpen("setCameraPosition")
         if position.shape != (3,):
             raise SotpyError(
@@ -568,6 +613,115 @@ class RobotViewer(Entity):
             self._viz.viewer["/Cameras/default/rotated/<object>"].set_property(
                 "position", [x, z, -y]
             )
+
+    @command
+    def frameRobot(self, q: np.ndarray | None = None, fill: float = 0.8) -> np.ndarray:
+        """Point the browser's camera at the robot at configuration ``q`` (default: the
+        last one handed over, else the neutral one), so that it fills about ``fill`` of
+        the view's height; returns the centre of the robot's bounding box (world, m).
+
+        meshcat 0.3's camera always looks at the scene's origin, so the scene is moved
+        instead: the robot, the floor grid and the world axes are translated by minus
+        that centre (the robot stands on the grid as before), and the camera is put in
+        front of the robot, a little to its left and above, at the distance where the
+        box's bounding sphere spans ``fill`` of meshcat's 75 degree field of view.
+        The box is that of the visual geometries (their meshes' axis-aligned boxes, at
+        their placements in ``q``). The user can still turn and zoom with the mouse."""
+        self._checkOpen("frameRobot")
+        who = f"{self.className}({self.name}).frameRobot"
+        if q is None:
+            q = self._lastQ if self._lastQ is not None else pin.neutral(self._model)
+        q = np.asarray(q, dtype=np.float64)
+        if q.shape != (self._nq,) or not np.isfinite(q).all():
+            raise SotpyError(f"{who}: q must be a finite configuration of size nq={self._nq}")
+        if not (isinstance(fill, (int, float)) and 0.05 <= fill <= 1.0):
+            raise SotpyError(f"{who}: fill must be a fraction in [0.05, 1], got {fill!r}")
+        lo, hi = _visualBox(self._model, self._visual, q)
+        centre = 0.5 * (lo + hi)
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.05)
+        distance = radius / math.tan(math.radians(0.5 * _FOV_DEGREES * fill))
+        direction = np.array(_CAMERA_DIRECTION) / np.linalg.norm(_CAMERA_DIRECTION)
+        shift = pin.SE3(np.eye(3), -centre).homogeneous
+        viewer = self._viz.viewer
+        with self._io:
+            for node in (self._viz.viewerRootNodeName, "/Grid", "/Axes"):
+                viewer[node].set_transform(shift)
+        self._centre = centre
+        self.setCameraPosition(distance * direction)
+        return centre
+
+    @command
+    def animate(self, configurations: np.ndarray, dt: float, repeat: bool = True) -> float:
+        """Send the motion ``configurations`` (k x nq, one row every ``dt`` seconds) to
+        the page, which plays it at real time (a meshcat animation: the page's
+        "Animations" menu pauses, resets and scrubs it, and ``timeScale`` slows it
+        down); ``repeat``: again and again, else once. A page opened later gets it too.
+        Returns the motion's duration, ``(k - 1) dt`` s.
+
+        The placements are computed here (forward kinematics of each row, as
+        ``display`` does) and sent once; nothing is sent while the page plays."""
+        self._checkOpen("animate")
+        who = f"{self.className}({self.name}).animate"
+        qs = np.asarray(configurations, dtype=np.float64)
+        if qs.ndim != 2 or qs.shape[1] != self._nq or len(qs) < 1 or not np.isfinite(qs).all():
+            raise SotpyError(
+                f"{who}: configurations must be finite, k x nq = k x {self._nq}, got "
+                f"{_shape(configurations)}"
+            )
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+            raise SotpyError(f"{who}: dt must be a finite number of s > 0, got {dt!r}")
+        animation = _meshcat().animation.Animation(default_framerate=1.0 / dt)
+        viz = self._viz
+        model, data = self._model, self._model.createData()
+        visual = self._visual
+        geometry_data = pin.GeometryData(visual)
+        root = viz.viewer
+        nodes = [viz.getViewerNodeName(o, pin.GeometryType.VISUAL) for o in visual.geometryObjects]
+        for k, q in enumerate(qs):
+            pin.forwardKinematics(model, data, q)
+            pin.updateGeometryPlacements(model, data, visual, geometry_data)
+            with animation.at_frame(root, k) as frame:
+                for node, M in zip(nodes, geometry_data.oMg, strict=True):
+                    frame[node].set_transform(M.homogeneous)
+        with self._io:
+            root.set_animation(animation, play=True, repetitions=_REPEAT if repeat else 1)
+        self._lastQ = qs[-1].copy()
+        return (len(qs) - 1) * float(dt)
+
+    @command
+    def pages(self) -> int:
+        """How many browser pages show the viewer now (meshcat's server logs each page
+        that connects and leaves)."""
+        opened, closed = self._pageEvents()
+        return opened - closed
+
+    def _pageEvents(self) -> tuple[int, int]:
+        """(pages that connected, pages that left) since the server started."""
+        if self._server is None:
+            return 0, 0
+        try:
+            text = self._server.log.read_text(errors="replace")
+        except OSError:
+            return 0, 0
+        opened = len(re.findall(r"^opened:", text, re.MULTILINE))
+        closed = len(re.findall(r"^closed:", text, re.MULTILINE))
+        return opened, closed
+
+    @command
+    def waitPages(self, timeout: float | None = None, poll: float = 0.2) -> bool:
+        """Wait until a page has been opened and every page opened is closed again, at
+        most ``timeout`` s (None: no limit); true when that happened, false on timeout.
+        Ctrl-C interrupts it (KeyboardInterrupt)."""
+        self._checkOpen("waitPages")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            opened, closed = self._pageEvents()
+            if opened and closed >= opened:
+                return True
+            if deadline is not None and time.monotonic() >= deadline:
+                return False
+            wait = poll if deadline is None else min(poll, max(0.0, deadline - time.monotonic()))
+            time.sleep(wait)
 
     @command
     def snapshot(
@@ -587,7 +741,9 @@ class RobotViewer(Entity):
         deadline = time.monotonic() + timeout
         if not self.flush(timeout):
             raise SotpyError(f"{who}: the latest configuration was not sent: {self.error!r}")
-        png = _renderPage(who, self.url(), width, height, self._meshes, deadline - time.monotonic())
+        png, _ = _renderPage(
+            who, self.url(), width, height, self._meshes, deadline - time.monotonic()
+        )
         Path(path).write_bytes(png)
         return str(path)
 
@@ -678,9 +834,18 @@ _TRAMPOLINE = (
 _TWO_FRAMES = "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(1))))"
 
 
-def _renderPage(who: str, url: str, width: int, height: int, meshes: int, timeout: float) -> bytes:
+def _renderPage(
+    who: str,
+    url: str,
+    width: int,
+    height: int,
+    meshes: int,
+    timeout: float,
+    probe: str | None = None,
+) -> tuple[bytes, Any]:
     """Load ``url`` in headless Chromium, wait until its scene holds ``meshes`` meshes,
-    and return a ``width`` x ``height`` PNG screenshot.
+    and return a ``width`` x ``height`` PNG screenshot, with the value of the JavaScript
+    expression ``probe`` evaluated in the page just before it (None without one).
 
     Chromium is driven through the DevTools protocol over a pipe (``--remote-debugging-
     pipe``: fd 3 in, fd 4 out, messages separated by NUL): a ``--screenshot`` run cannot
@@ -749,10 +914,16 @@ def _renderPage(who: str, url: str, width: int, height: int, meshes: int, timeou
                 )
             time.sleep(0.2)
         cdp.call("Runtime.evaluate", {"expression": _TWO_FRAMES, "awaitPromise": True}, session)
+        value = None
+        if probe is not None:
+            reply = cdp.call(
+                "Runtime.evaluate", {"expression": probe, "returnByValue": True}, session
+            )
+            value = reply.get("result", {}).get("value")
         data = cdp.call("Page.captureScreenshot", {"format": "png"}, session)["data"]
         with contextlib.suppress(SotpyError):
             cdp.call("Browser.close")
-        return base64.b64decode(data)
+        return base64.b64decode(data), value
     except (OSError, ValueError) as exc:
         raise SotpyError(f"{who}: Chromium failed: {exc!r}{_log(profile)}") from exc
     except SotpyError as exc:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from typing import Any
 
 __all__ = [
@@ -34,13 +35,14 @@ __all__ = [
     "REACH_ROBOTS",
     "ROBOT_DEMO_DEFAULTS",
     "TORQUE_STRATEGIES",
-    "Pacer",
-    "attach_viewer",
-    "detach_viewer",
+    "VIEWER_FRAME",
     "finite_float",
+    "non_negative_float",
+    "open_viewer",
     "positive_float",
     "reach_options",
     "reach_run",
+    "replay",
     "robot_options",
     "robot_run",
     "torque_callbacks_options",
@@ -49,55 +51,85 @@ __all__ = [
     "torque_run",
     "torque_talos_options",
     "torque_talos_run",
+    "viewer_options",
 ]
 
 
-class Pacer:
-    """Real-time pacing of a demo loop: ``wait(k)`` sleeps until tick ``k``'s deadline
-    ``start + k dt`` (absolute, so no drift) and counts the ticks that ended more than
-    one ``dt`` after it (:attr:`late`). ``sleep`` is injectable for tests."""
-
-    def __init__(self, dt: float, sleep: Any = None) -> None:
-        import time
-
-        self._clock = time.perf_counter
-        self._sleep = time.sleep if sleep is None else sleep
-        self.dt = dt
-        self.late = 0
-        self.start = self._clock()
-
-    def wait(self, k: int) -> None:
-        """Wait for the deadline of tick ``k`` (counted from the construction)."""
-        left = self.start + k * self.dt - self._clock()
-        if left > 0:
-            self._sleep(left)
-        elif left < -self.dt:
-            self.late += 1
-
-    def elapsed(self) -> float:
-        """Seconds since the construction."""
-        return self._clock() - self.start
+#: Seconds of motion between two frames the viewer replays (50 frames/s).
+VIEWER_FRAME = 0.02
 
 
-def attach_viewer(robot: Any, prefix: str) -> Any:
-    """A ``RobotViewer`` named ``<prefix>_viewer`` on ``robot``'s models, fed by its
-    device's state and refreshed every 20 ticks by the device's ``after`` calls; close
-    it with :func:`detach_viewer`."""
-    from ..graph import plug
+def open_viewer(robot: Any, prefix: str, emit: Callable[[str], None]) -> Any:
+    """A ``RobotViewer`` named ``<prefix>_viewer`` on ``robot``'s models, showing the
+    robot where its device is now, with the camera framed on it; prints its address.
+    Close it with ``view.close()``. The demo runs without it and sends it the whole
+    motion afterwards (:func:`replay`), so the run is not slowed and the motion is seen
+    at real time, however long the run took to compute."""
     from ..viewer import RobotViewer
 
-    view = RobotViewer(
-        f"{prefix}_viewer", robot.model, robot.visual_model, robot.collision_model, period=20
+    view = RobotViewer(f"{prefix}_viewer", robot.model, robot.visual_model, robot.collision_model)
+    q = robot.device.state.value
+    with view.lock:
+        view.viz.display(q)
+    view.frameRobot(q)
+    emit(
+        f"viewer: open {view.url()} in a browser; the motion is replayed there at real "
+        "time once it is computed"
     )
-    plug(robot.device.state, view.state)
-    robot.device.after.addSignal(view.display)
     return view
 
 
-def detach_viewer(robot: Any, view: Any) -> None:
-    """Stop feeding ``view`` and close it (its server process ends)."""
-    robot.device.after.rmSignal(view.display, missing_ok=True)
-    view.close()
+def replay(
+    view: Any,
+    configurations: Any,
+    dt: float,
+    hold: float | None,
+    emit: Callable[[str], None],
+) -> None:
+    """Send the run (``configurations``: one row per tick of ``dt`` s, the start
+    first) to ``view``, to be played in the page at real time and repeated, then keep
+    the viewer up: until the page is closed (after it was opened) or Ctrl-C when
+    ``hold`` is None, at most ``hold`` seconds otherwise (0: not at all)."""
+    import numpy as np
+
+    qs = np.asarray(configurations)
+    step = max(1, round(VIEWER_FRAME / dt))
+    frames = qs[::step]
+    if (len(qs) - 1) % step:
+        frames = np.vstack((frames, qs[-1:]))  # the last configuration too
+    duration = view.animate(frames, step * dt)
+    motion = f"the page replays the {duration:.2f} s motion at real time, again and again"
+    if hold is not None and hold <= 0:
+        emit(f"viewer: {motion}; closing now (--hold 0)")
+        return
+    menu = "(its Controls > Animations menu pauses, slows and scrubs it)"
+    if hold is None:
+        emit(f"viewer: {motion} {menu}; close the page or press Ctrl-C to quit")
+    else:
+        emit(f"viewer: {motion} {menu}; closing in {hold:g} s (Ctrl-C: now)")
+    try:
+        view.waitPages(timeout=hold)
+    except KeyboardInterrupt:
+        emit("")  # after the ^C the terminal shows
+    emit("viewer: closed")
+
+
+def viewer_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--viewer`` and ``--hold S``."""
+    parser.add_argument(
+        "--viewer",
+        action="store_true",
+        help="show the robot in a meshcat viewer (prints its address): the motion is "
+        "replayed there at real time, again and again, until you close the page or "
+        "press Ctrl-C",
+    )
+    parser.add_argument(
+        "--hold",
+        type=non_negative_float,
+        metavar="S",
+        help="with --viewer: keep the viewer up at most S seconds after the run (0: close "
+        "it at once; default: until the page is closed or Ctrl-C)",
+    )
 
 
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
@@ -145,11 +177,7 @@ def robot_options(parser: argparse.ArgumentParser) -> None:
         help=f"robot: a name listed by 'sotpy robots' or a .toml description "
         f"(default {d['robot']})",
     )
-    parser.add_argument(
-        "--viewer",
-        action="store_true",
-        help="show the robot in a meshcat viewer (prints its address) and run at real time",
-    )
+    viewer_options(parser)
     parser.add_argument(
         "--duration",
         type=positive_float,
@@ -164,6 +192,9 @@ def robot_options(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help=f"time step, s (default {d['dt']:g})",
     )
+    parser.add_argument(
+        "--plot", metavar="PATH", help="save the wrist, the CoM and the joints' travel (PNG)"
+    )
 
 
 def robot_run(args: argparse.Namespace) -> int:
@@ -174,20 +205,36 @@ def robot_run(args: argparse.Namespace) -> int:
 
     try:
         result = run_robot_tour(
-            robot=args.robot, duration=args.duration, dt=args.dt, viewer=args.viewer
+            robot=args.robot,
+            duration=args.duration,
+            dt=args.dt,
+            viewer=args.viewer,
+            hold=args.hold,
+            plot=args.plot,
         )
     except SotpyError as exc:
         print(f"sotpy demo robot: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("sotpy demo robot: interrupted (the viewer is closed)", file=sys.stderr)
+        print("sotpy demo robot: interrupted (the viewer, if any, is closed)", file=sys.stderr)
         return 130
     verdict = "OK" if result["ok"] else "FAILED"
     print(
         f"robot tour {verdict}: {result['robot']}, {result['ticks']} ticks in "
-        f"{result['wall_time']:.2f} s"
+        f"{result['wall_time']:.2f} s ({_pace(result)})"
     )
     return 0 if result["ok"] else 1
+
+
+def _pace(result: dict[str, Any]) -> str:
+    """How the computation compares with real time, in words."""
+    simulated, wall = result["duration"], result["wall_time"]
+    if wall <= 0:
+        return f"{simulated:g} s simulated"
+    ratio = simulated / wall
+    if ratio >= 1:
+        return f"{simulated:g} s simulated, {ratio:.1f}x faster than real time"
+    return f"{simulated:g} s simulated, {1 / ratio:.1f}x slower than real time"
 
 
 def non_negative_float(text: str) -> float:
@@ -222,11 +269,7 @@ def reach_options(parser: argparse.ArgumentParser, robot: str) -> None:
     parser.add_argument(
         "--plot", metavar="PATH", help="save the task errors and the CoM path (PNG)"
     )
-    parser.add_argument(
-        "--viewer",
-        action="store_true",
-        help="show the robot in a meshcat viewer (prints its address) and run at real time",
-    )
+    viewer_options(parser)
     parser.add_argument(
         "--target-offset",
         type=finite_float,
@@ -269,6 +312,7 @@ def reach_run(args: argparse.Namespace) -> int:
             target_offset=args.target_offset,
             plot=args.plot,
             viewer=args.viewer,
+            hold=args.hold,
             margin=args.margin,
             damping=args.damping,
         )
@@ -276,13 +320,13 @@ def reach_run(args: argparse.Namespace) -> int:
         print(f"{name}: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"{name}: interrupted (the viewer is closed)", file=sys.stderr)
+        print(f"{name}: interrupted (the viewer, if any, is closed)", file=sys.stderr)
         return 130
     failed = [k for k, v in result["checks"].items() if not v]
     verdict = "OK" if result["ok"] else f"FAILED ({', '.join(failed)})"
     print(
         f"reach {verdict}: {result['robot']}, {result['ticks']} ticks in "
-        f"{result['wall_time']:.2f} s"
+        f"{result['wall_time']:.2f} s ({_pace(result)})"
     )
     return 0 if result["ok"] else 1
 

@@ -1,9 +1,11 @@
 r"""The SoT slides' humanoid reaching demo: feet fixed, CoM over the support polygon, the
 right wrist to a target, half-sitting posture, joint limits hard.
 
-``sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
-[--target-offset X Y Z]`` and ``examples/humanoid_reach.py`` call :func:`run_reach`,
-which builds this graph (``p`` = ``reach_<robot>``)::
+:func:`run_reach` is the story, read top to bottom: it builds this graph in plain
+sight, runs it, and hands the run to :class:`sotpy.demos.checks.ReachLog` (the checks
+and the table) and :func:`sotpy.plotting.plot_reach` (the figure). ``sotpy demo
+talos|romeo|nao`` calls it; ``examples/humanoid_reach.py`` is the same story as a
+script to copy. The graph (``p`` = ``reach_<robot>``)::
 
     robot = load_robot("talos", prefix=p)                 # Dynamic + Device, half-sitting
     robot.device.setControlType("velocity")
@@ -63,18 +65,15 @@ level 1 (the ready task ``couplings``), and its residual is checked.
 from __future__ import annotations
 
 import math
-import re
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
-from ..errors import RobotError, SotpyError
+from ..errors import RobotError
 from ..graph import plug, pool
-from . import Pacer, attach_viewer, detach_viewer
 
 __all__ = [
     "COM_TOLERANCE",
@@ -128,11 +127,6 @@ COUPLING_TOLERANCE = 1e-9
 #: How far the CoM's projection may cross the shrunk polygon's edges (m): the bound is
 #: met by the linear prediction, the integration adds a second-order term.
 COM_TOLERANCE = 1e-6
-#: Largest excursion beyond a joint limit (rounding), rad or m.
-ROUNDING = 1e-9
-
-_WRIST = "right-wrist"
-_SUMMARY_TIMES = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)
 
 
 # -- maths -------------------------------------------------------------------------------
@@ -165,35 +159,6 @@ def wristDecay(
     return out
 
 
-def _limit_indices(model: pin.Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """Index in q, lower and upper limits and names of the 1-DoF joints with finite
-    limits."""
-    iq, names = [], []
-    for j in range(1, model.njoints):
-        jm = model.joints[j]
-        if jm.nq == 1 and jm.nv == 1:
-            lo, hi = model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q]
-            if abs(lo) < 1e30 and abs(hi) < 1e30:
-                iq.append(jm.idx_q)
-                names.append(model.names[j])
-    idx = np.array(iq, dtype=np.intp)
-    return idx, model.lowerPositionLimit[idx].copy(), model.upperPositionLimit[idx].copy(), names
-
-
-def _free_prefix(robot: str | Path) -> str:
-    """``reach_<robot>``, or ``reach_<robot>_<k>`` when entities of that prefix exist."""
-    text = str(robot)
-    base = Path(text).stem if (text.endswith(".toml") or "/" in text or "\\" in text) else text
-    base = re.sub(r"[^A-Za-z0-9_-]", "_", base) or "robot"
-    k = 1
-    while True:
-        prefix = f"reach_{base}" if k == 1 else f"reach_{base}_{k}"
-        names = (f"{prefix}_dynamic", f"{prefix}_device", f"{prefix}_sot", f"task_{prefix}_contact")
-        if not any(pool.hasEntity(n) for n in names):
-            return prefix
-        k += 1
-
-
 def _check_number(what: str, value: Any, positive: bool = True) -> float:
     number = isinstance(value, (int, float)) and not isinstance(value, bool)
     if not (number and math.isfinite(value) and (value > 0 or not positive)):
@@ -202,9 +167,24 @@ def _check_number(what: str, value: Any, positive: bool = True) -> float:
     return float(value)
 
 
+def _checked_robot(robot: str | Path) -> dict[str, Any]:
+    """The robot's description, if it has two feet and a right wrist (checked before
+    any entity is created)."""
+    from ..dynamics import robot_info
+
+    info = robot_info(robot)
+    sides, ops = sorted(info.get("feet", {})), info.get("opPoints", {})
+    if sides != ["left", "right"] or "right-wrist" not in ops:
+        raise RobotError(
+            f"reach demo: robot {info['name']!r} needs two feet and a 'right-wrist' op "
+            f"point (it has feet {sides} and op points {', '.join(ops) or 'none'})"
+        )
+    return info
+
+
 # -- the story ---------------------------------------------------------------------------
 def run_reach(
-    robot: str = "talos",
+    robot: str | Path = "talos",
     duration: float = 2.0,
     dt: float = 1e-3,
     target_offset: Sequence[float] | None = None,
@@ -216,7 +196,7 @@ def run_reach(
     posture_gain: float = POSTURE_GAIN,
     contact_gain: float = CONTACT_GAIN,
     damping: float = 0.0,
-    sleep: Callable[[float], None] = time.sleep,
+    hold: float | None = 0.0,
 ) -> dict[str, Any]:
     """Run the reaching demo (the module doc describes the graph and the maths).
 
@@ -227,8 +207,9 @@ def run_reach(
         dt: control period and integration step (s, > 0).
         target_offset: the target minus the wrist's start (world axes, m); default
             :data:`REACH_OFFSETS` of the robot (or :data:`DEFAULT_OFFSET`).
-        plot: save a PNG there (errors over time, the CoM in the support polygon).
-        viewer: show the robot in a meshcat viewer and run at real time.
+        plot: save a PNG there (:func:`sotpy.plotting.plot_reach`).
+        viewer: show the robot in a meshcat viewer, and replay the motion there at real
+            time once computed (:func:`sotpy.demos.replay`).
         quiet: print nothing (the text is still returned).
         margin: the CoM's projection stays this far inside the polygon's edges (m, >= 0).
         wrist_gain: ``(g0, ginf, xref, p)`` of the wrist's ``GainAdaptive.setByPoint``.
@@ -236,7 +217,8 @@ def run_reach(
         contact_gain: ``controlGain`` k of the level-1 task, in (0, 1].
         damping: the damping of the wrist and posture levels (``SOT.setTaskDamping``;
             0: exact). The feet, the CoM and the joint limits stay exact.
-        sleep: the function that waits when paced (``time.sleep``).
+        hold: with ``viewer``, keep it up at most this many seconds after the run
+            (0: close it at once; None: until the page is closed or Ctrl-C).
 
     Returns:
         A dict: ``robot``, ``prefix``, ``entities`` (names created), ``levels`` (names,
@@ -249,15 +231,16 @@ def run_reach(
         ``methods`` (the solver's path per control), ``sole_drift`` (side ->
         ``(n + 1) x 2``: distance of the sole's position and angle of its rotation from
         the start, m and rad), ``feet_drift`` (largest of both, ``(m, rad)``),
-        ``com`` ((n + 1) x 2, m), ``polygon`` (k x 2 vertices, m), ``com_distance``
+        ``com`` ((n + 1) x 2, m), ``polygon`` (k x 2 vertices, m), ``polygon_inner``
+        (the polygon shrunk by the margin, or None), ``com_distance``
         ((n + 1) x k: distance of the CoM's projection to each edge's line, m,
         positive inside), ``margin``, ``joint_margin`` ((n + 1): smallest distance of
         a joint to its limits, rad or m), ``joint_margin_min`` (joint name -> smallest
         over the run), ``wrist_final`` (m), ``wrist_speed`` (m/s at the end),
         ``reached``, ``out_of_reach`` (stopped away from the target), ``checks``
-        (name -> bool), ``ok`` (every check), ``table`` (the text printed),
-        ``summary`` (the convergence table), ``plot`` (path or None), ``wall_time``
-        (s of the loop), ``viewer_url``, ``viewer_pid``, ``late_ticks``.
+        (name -> bool), ``ok`` (every check), ``tolerances``, ``table`` (the text
+        printed), ``summary`` (the convergence table), ``plot`` (path or None),
+        ``wall_time`` (s of computation of the loop), ``viewer_url``, ``viewer_pid``.
 
     Raises:
         ValueError: a bad number.
@@ -266,12 +249,14 @@ def run_reach(
         sotpy.errors.SotpyError: a viewer that cannot start, a failing step, a plot that
             cannot be saved.
     """
-    from ..dynamics import load_robot, robot_info
+    from ..dynamics import load_robot
+    from ..plotting import plot_reach
     from ..solvers.sot import SOT
     from ..tasks import TaskInequality
+    from . import open_viewer, replay
+    from .checks import ReachLog, freePrefix
 
-    duration = _check_number("duration", duration)
-    dt = _check_number("dt", dt)
+    duration, dt = _check_number("duration", duration), _check_number("dt", dt)
     margin = _check_number("margin", margin, positive=False)
     if margin < 0:
         raise ValueError(f"run_reach: margin must be >= 0 m, got {margin!r}")
@@ -283,383 +268,86 @@ def run_reach(
     gains = [float(g) for g in wrist_gain]
     if len(gains) != 4:
         raise ValueError(f"run_reach: wrist_gain is (g0, ginf, xref, p), got {wrist_gain!r}")
-    steps = max(1, round(duration / dt))
-    lines: list[str] = []
-
-    def emit(text: str) -> None:
-        lines.append(text)
-        if not quiet:
-            print(text, flush=True)
-
-    info = robot_info(robot)  # checked before any entity is created
-    sides, ops = sorted(info.get("feet", {})), info.get("opPoints", {})
-    if sides != ["left", "right"] or _WRIST not in ops:
-        raise RobotError(
-            f"reach demo: robot {info['name']!r} needs two feet and a {_WRIST!r} op point "
-            f"(it has feet {sides} and op points {', '.join(ops) or 'none'})"
-        )
+    info = _checked_robot(robot)
     if target_offset is None:
         target_offset = REACH_OFFSETS.get(info["name"], DEFAULT_OFFSET)
     offset = np.asarray(target_offset, dtype=float)
     if offset.shape != (3,) or not np.isfinite(offset).all():
         raise ValueError(f"run_reach: target_offset must be 3 finite numbers (m), got {offset}")
-    prefix = _free_prefix(robot)
-    r = load_robot(robot, prefix=prefix)
-    entities = [f"{prefix}_dynamic", f"{prefix}_device"]
-    model, dyn, device = r.model, r.dynamic, r.device
-    device.setControlType("velocity")
-    t0 = max(device.state.time, 0)
+    steps = max(1, round(duration / dt))
+    suffixes = ("{prefix}_dynamic", "{prefix}_device", "{prefix}_sot", "task_{prefix}_contact")
+    prefix = freePrefix("reach", robot, suffixes)
+    known = {e.name for e in pool.entities()}
+    lines: list[str] = []
 
-    # level 1: feet, couplings, balance
-    feet = [r.tasks["left-ankle"], r.tasks["right-ankle"]]
-    couplings = r.tasks.get("couplings")  # Nao's HipYawPitch pair, Romeo's fingers
+    def say(text: str) -> None:
+        lines.append(text)
+        if not quiet:
+            print(text, flush=True)
+
+    # -- the graph ----------------------------------------------------------------------
+    r = load_robot(robot, prefix=prefix)  # Dynamic + Device at half-sitting
+    r.device.setControlType("velocity")
+    t0 = max(r.device.state.time, 0)
+    # level 1, one TaskInequality: both feet fixed and the couplings (bounds [0, 0]),
+    # the CoM's projection inside the support polygon shrunk by the margin (N c <= b)
+    feet = [r.tasks["left-ankle"].feature, r.tasks["right-ankle"].feature]
+    couplings = r.tasks.get("couplings")  # Nao's HipYawPitch pair
+    equalities = feet + ([couplings.feature] if couplings else [])
     balance = r.tasks["balance"]
     balance.setMargin(margin)
     balance.task.dt.value = dt
     contact = TaskInequality(f"task_{prefix}_contact")
-    equalities = [m.feature for m in feet] + ([couplings.feature] if couplings else [])
-    for f in equalities:
-        contact.add(f)
-    contact.add(balance.feature)
-    neq = sum(int(f.error(t0).shape[0]) for f in equalities)
+    for feature in [*equalities, balance.feature]:
+        contact.add(feature)
+    rows = sum(len(f.error(t0)) for f in equalities)
     bounds = balance.bounds()
-    contact.referenceInf.value = np.concatenate((np.zeros(neq), np.full(len(bounds), -np.inf)))
-    contact.referenceSup.value = np.concatenate((np.zeros(neq), bounds))
+    contact.referenceInf.value = np.concatenate((np.zeros(rows), np.full(len(bounds), -np.inf)))
+    contact.referenceSup.value = np.concatenate((np.zeros(rows), bounds))
     contact.dt.value = dt
     contact.controlGain.value = contact_gain
-    # level 2: the wrist; level 3: half-sitting
-    wrist = r.tasks[_WRIST]
-    start = dyn.signal(_WRIST)(t0).translation.copy()
+    # level 2: the right wrist's position to the target, with SoT's adaptive gain
+    wrist = r.tasks["right-wrist"]
+    start = r.dynamic.signal("right-wrist")(t0).translation.copy()
     target = start + offset
     wrist.gotoNd(target, "111000", gain=gains)
+    # level 3: half-sitting
     posture = r.tasks["posture"]
     posture.gain.setConstant(posture_gain)
-
-    sot = SOT(f"{prefix}_sot", dyn)
+    # level 0 (the joint limits) is the SOT's own
+    sot = SOT(f"{prefix}_sot", r.dynamic)
     sot.dt.value = dt
     for task in (contact, wrist.task, posture.task):
         sot.push(task)
     for task in (wrist.task, posture.task):  # the feet and the CoM stay exact
         sot.setTaskDamping(task, damping)
-    plug(sot.control, device.control)
-    for m in r.tasks.created().values():
-        entities += [e.name for e in m.entities()]
-        if hasattr(m, "featureDes"):
-            entities.append(m.featureDes.name)
-    entities += [contact.name, sot.name]
-    levels = [
-        "joint limits (SOT, hard)",
-        "contact: both feet fixed"
-        + (" + couplings" if couplings else "")
-        + f" + CoM in the support polygon (margin {margin:g} m)",
-        f"{_WRIST} position (selec 111000)",
-        "posture (half-sitting)",
-    ]
+    plug(sot.control, r.device.control)
 
-    # recording
-    soles = {}
-    for side, foot in r.feet.items():
-        name = f"{prefix}-{side}-sole"
-        dyn.createPosition(name, foot.frame)
-        soles[side] = dyn.signal(name)
-    wristSig = dyn.signal(_WRIST)
-    polygon = balance.polygon.getVertices()
-    N, b = balance.polygon.getNormals(), balance.polygon.getOffsets()
-    lim_q, lim_lo, lim_hi, lim_names = _limit_indices(model)
-    n1 = steps + 1
-    qs = np.empty((n1, model.nq))
-    com = np.empty((n1, 2))
-    err = {k: np.empty(n1) for k in ("feet", "wrist", "posture")}
-    err["couplings"] = np.empty(n1) if couplings else None
-    drift = {side: np.empty((n1, 2)) for side in soles}
-    residuals = np.full((steps, 4), np.nan)
-    methods: list[str] = []
-    sole0 = {side: sig(t0).copy() for side, sig in soles.items()}
-    feetFeatures = [m.feature for m in feet]
-
-    def record(k: int) -> None:
-        t = t0 + k
-        qs[k] = device.state(t)
-        com[k] = dyn.com(t)[:2]
-        err["feet"][k] = math.sqrt(
-            sum(float(np.dot(e, e)) for e in (f.error(t) for f in feetFeatures))
-        )
-        if couplings is not None:
-            err["couplings"][k] = float(np.linalg.norm(couplings.feature.error(t)))
-        err["wrist"][k] = float(np.linalg.norm(wristSig(t).translation - target))
-        err["posture"][k] = float(np.linalg.norm(posture.feature.error(t)))
-        for side, sig in soles.items():
-            M, M0 = sig(t), sole0[side]
-            drift[side][k, 0] = np.linalg.norm(M.translation - M0.translation)
-            drift[side][k, 1] = np.linalg.norm(pin.log3(M0.rotation.T @ M.rotation))
-
-    view = None
-    url = pid = None
-    wall = 0.0
+    # -- run it -------------------------------------------------------------------------
+    view = open_viewer(r, prefix, say) if viewer else None
     try:
-        if viewer:
-            view = attach_viewer(r, prefix)
-            entities.append(view.name)
-            url = view.url()
-            proc = view.serverProcess
-            pid = None if proc is None else proc.pid
-            emit(f"viewer: open {url} in a browser (the loop runs at real time)")
-        emit(
-            f"reach {r.name}: {_WRIST} from {_xyz(start)} to {_xyz(target)} m "
-            f"({np.linalg.norm(offset):.3f} m away); velocity control, dt = {dt:g} s, "
-            f"{steps} ticks"
-        )
-        for i, text in enumerate(levels):
-            emit(f"  level {i}: {text}")
-        record(0)
-        pacer = Pacer(dt, sleep)
-        for k in range(1, steps + 1):
-            device.increment(dt)
-            res = sot.lastResult
-            residuals[k - 1, : len(res.residuals)] = res.residuals
-            methods.append(res.method)
-            record(k)
-            if view is not None:
-                pacer.wait(k)
-        wall = pacer.elapsed()
-        late = pacer.late
+        log = ReachLog(r, sot, target, steps, dt, margin, gains, damping)
+        say(log.header())
+        begin = time.perf_counter()
+        for _ in range(steps):
+            r.device.increment(dt)
+            log.record()
+        result = log.report(wall_time=time.perf_counter() - begin)
+        for line in result["table"].splitlines():
+            say(line)
+        result["plot"] = None
+        if plot is not None:
+            plot_reach(result, plot)
+            result["plot"] = str(plot)
+            say(f"plot: {plot}")
+        result["viewer_url"] = result["viewer_pid"] = None
         if view is not None:
-            view.flush(1.0)
+            result["viewer_url"] = view.url()
+            result["viewer_pid"] = view.serverProcess.pid
+            replay(view, log.q, dt, hold, say)
     finally:
         if view is not None:
-            detach_viewer(r, view)
-
-    # checks
-    times = np.arange(n1) * dt
-    com_distance = b[None, :] - com @ N.T
-    jm = np.minimum(qs[:, lim_q] - lim_lo, lim_hi - qs[:, lim_q])
-    joint_margin = jm.min(axis=1) if jm.size else np.full(n1, np.inf)
-    joint_margin_min = dict(zip(lim_names, (float(x) for x in jm.min(axis=0)), strict=True))
-    feet_drift = (
-        max(float(d[:, 0].max()) for d in drift.values()),
-        max(float(d[:, 1].max()) for d in drift.values()),
-    )
-    wrist_final = float(err["wrist"][-1])
-    v_end = device.velocity(t0 + steps)
-    # the wrist's speed at the end: its LOCAL Jacobian times the last velocity
-    Jw = dyn.signal("J" + _WRIST)(t0 + steps)
-    Mw = wristSig(t0 + steps)
-    wrist_speed = float(np.linalg.norm(Mw.rotation @ (Jw[:3] @ v_end)))
-    level1 = float(np.nanmax(residuals[:, 1]))
-    bounds_report = device.boundsReport()
-    clamped = sum(v["count"] for v in bounds_report.values())
-    reached = wrist_final <= REACH_TOLERANCE
-    g0, ginf, xref, p = gains
-    asked = ((g0 - ginf) * p ** (wrist_final / xref) + ginf) * wrist_final
-    out_of_reach = not reached and wrist_speed <= STALL_RATIO * asked
-    checks = {
-        "wrist": reached or out_of_reach,
-        "feet": feet_drift[0] <= FEET_TOLERANCE and feet_drift[1] <= FEET_TOLERANCE,
-        "com": bool((com_distance.min(axis=1) >= margin - COM_TOLERANCE).all()),
-        "limits": bool((joint_margin >= -ROUNDING).all()) and clamped == 0,
-        "level1": level1 <= LEVEL1_TOLERANCE,
-        "couplings": couplings is None or float(err["couplings"].max()) <= COUPLING_TOLERANCE,
-    }
-    ok = all(checks.values())
-
-    summary = _summary(times, err, drift, com_distance, residuals, duration)
-    for line in summary.splitlines():
-        emit(line)
-    if reached:
-        emit(f"wrist: reached the target ({wrist_final:.1e} m; tolerance {REACH_TOLERANCE:g} m)")
-    elif out_of_reach:
-        emit(
-            f"wrist: target OUT OF REACH: stopped {wrist_final:.4f} m from it (speed "
-            f"{wrist_speed:.1e} m/s): the best the levels above allow"
-        )
-    else:
-        emit(
-            f"wrist: NOT reached: {wrist_final:.4f} m from the target and still moving "
-            f"({wrist_speed:.1e} m/s): run longer"
-        )
-    emit(
-        f"feet: largest sole drift {feet_drift[0]:.1e} m, {feet_drift[1]:.1e} rad "
-        f"(tolerance {FEET_TOLERANCE:g}){'' if checks['feet'] else ' EXCEEDED'}"
-    )
-    emit(
-        f"CoM: at least {com_distance.min():.4f} m inside the support polygon's edges "
-        f"(margin {margin:g} m){'' if checks['com'] else ' VIOLATED'}"
-    )
-    # joints resting on a limit from the start (Talos' grippers) say nothing of the run
-    resting = [n for n, x in zip(lim_names, jm[0], strict=True) if x <= ROUNDING]
-    moving = {n: v for n, v in joint_margin_min.items() if n not in resting}
-    closest = min(moving, key=moving.get) if moving else None
-    text = f"closest {closest}, {moving[closest]:.4f} from its limit" if closest else "none moved"
-    if resting:
-        text += f"; resting on a limit from the start: {_few(resting)}"
-    verdict = (
-        "every joint within its limits at every tick"
-        if checks["limits"]
-        else f"a joint LEFT its limits (by {max(0.0, -float(joint_margin.min())):.1e})"
-    )
-    emit(f"limits: {verdict} ({text}); device clamps: {clamped}")
-    emit(f"level 1: largest residual {level1:.1e} (tolerance {LEVEL1_TOLERANCE:g})")
-    if couplings is not None:
-        emit(
-            f"couplings: largest residual {float(err['couplings'].max()):.1e} rad "
-            f"({_few(couplings.couplings.list())})"
-        )
-    if late:
-        emit(f"{late} of {steps} ticks ended more than dt after their real-time deadline")
-
-    result: dict[str, Any] = {
-        "robot": r.name,
-        "prefix": prefix,
-        "entities": entities,
-        "levels": levels,
-        "ticks": steps,
-        "dt": dt,
-        "duration": steps * dt,
-        "start": start,
-        "target": target,
-        "target_offset": offset,
-        "time": times,
-        "q": qs,
-        "errors": err,
-        "residuals": residuals,
-        "methods": methods,
-        "sole_drift": drift,
-        "feet_drift": feet_drift,
-        "com": com,
-        "polygon": polygon,
-        "com_distance": com_distance,
-        "margin": margin,
-        "joint_margin": joint_margin,
-        "joint_margin_min": joint_margin_min,
-        "wrist_final": wrist_final,
-        "wrist_speed": wrist_speed,
-        "reached": reached,
-        "out_of_reach": out_of_reach,
-        "checks": checks,
-        "ok": ok,
-        "summary": summary,
-        "wall_time": wall,
-        "viewer_url": url,
-        "viewer_pid": pid,
-        "late_ticks": late,
-        "plot": None,
-    }
-    if plot is not None:
-        result["plot"] = _plot(result, Path(plot))
-        emit(f"plot: {result['plot']}")
+            view.close()
     result["table"] = "\n".join(lines)
+    result["entities"] = [e.name for e in pool.entities() if e.name not in known]
     return result
-
-
-# -- text and plot -----------------------------------------------------------------------
-def _few(names: Sequence[str], n: int = 3) -> str:
-    """The first ``n`` names, then how many more."""
-    more = f" and {len(names) - n} more" if len(names) > n else ""
-    return ", ".join(names[:n]) + more
-
-
-def _xyz(v: np.ndarray) -> str:
-    return "(" + ", ".join(f"{x:.3f}" for x in v) + ")"
-
-
-def _summary(
-    times: np.ndarray,
-    err: dict[str, Any],
-    drift: dict[str, np.ndarray],
-    com_distance: np.ndarray,
-    residuals: np.ndarray,
-    duration: float,
-) -> str:
-    """The convergence table: each task's error at a few times and at the end."""
-    n = len(times) - 1
-    dt = times[1] - times[0] if n else 1.0
-    ticks = sorted({min(n, round(s / dt)) for s in _SUMMARY_TIMES if s < duration} | {n})
-    header = (
-        f"{'t [s]':>7}  {'wrist [m]':>10}  {'feet [m]':>9}  {'feet [rad]':>10}  "
-        f"{'CoM in [m]':>10}  {'posture':>9}  {'level-1 res':>11}"
-    )
-    rows = [header]
-    for k in ticks:
-        d = np.max([drift[s][k] for s in drift], axis=0)
-        res = residuals[k - 1, 1] if k > 0 else 0.0
-        rows.append(
-            f"{times[k]:7.3f}  {err['wrist'][k]:10.2e}  {d[0]:9.1e}  {d[1]:10.1e}  "
-            f"{com_distance[k].min():10.4f}  {err['posture'][k]:9.2e}  {res:11.1e}"
-        )
-    return "\n".join(rows)
-
-
-def _plot(result: dict[str, Any], path: Path) -> str:
-    """Errors over time (log scale) and the CoM's path in the support polygon; a PNG
-    saved with matplotlib's Agg canvas (no pyplot: the user's backend is left alone)."""
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:
-        raise SotpyError(
-            f"cannot save the plot {str(path)!r}: matplotlib is not installed "
-            "(pip install 'sotpy[plot]')"
-        ) from None
-    fig = Figure(figsize=(11.0, 4.5), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax, ax2 = fig.subplots(1, 2, width_ratios=(1.6, 1.0))
-    t = result["time"]
-    tiny = 1e-16
-    series = [
-        (result["errors"]["wrist"], "wrist to target [m]"),
-        (result["errors"]["posture"], "posture |e| [rad]"),
-        (np.max([d[:, 0] for d in result["sole_drift"].values()], axis=0), "sole drift [m]"),
-        (np.max([d[:, 1] for d in result["sole_drift"].values()], axis=0), "sole drift [rad]"),
-    ]
-    if result["errors"]["couplings"] is not None:
-        series.append((result["errors"]["couplings"], "coupling residual [rad]"))
-    for y, label in series:
-        ax.semilogy(t, np.maximum(y, tiny), label=label)
-    ax.axhline(REACH_TOLERANCE, color="grey", lw=0.8, ls="--")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("error")
-    ax.set_ylim(1e-12, None)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8)
-    ax.set_title(f"{result['robot']}: task errors")
-    poly = np.vstack((result["polygon"], result["polygon"][:1]))
-    ax2.plot(poly[:, 0], poly[:, 1], "k-", label="support polygon")
-    inner = _shrunk(result["polygon"], result["margin"])
-    if inner is not None:
-        inner = np.vstack((inner, inner[:1]))
-        ax2.plot(inner[:, 0], inner[:, 1], "k--", lw=0.8, label=f"margin {result['margin']:g} m")
-    c = result["com"]
-    ax2.plot(c[:, 0], c[:, 1], "C0-", label="CoM projection")
-    ax2.plot(c[0, 0], c[0, 1], "C0o", ms=4)
-    ax2.plot(c[-1, 0], c[-1, 1], "C0s", ms=4)
-    ax2.set_aspect("equal")
-    ax2.set_xlabel("x [m]")
-    ax2.set_ylabel("y [m]")
-    ax2.grid(True, alpha=0.3)
-    ax2.legend(loc="upper right", fontsize=8)
-    ax2.set_title("CoM over the support polygon")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=100)
-    except OSError as exc:
-        raise SotpyError(f"cannot save the plot {str(path)!r}: {exc}") from None
-    return str(path)
-
-
-def _shrunk(vertices: np.ndarray, margin: float) -> np.ndarray | None:
-    """The polygon with every edge moved inwards by ``margin`` (its vertices), or None
-    if it vanishes. Vertex i is the intersection of the shrunk edges i - 1 and i."""
-    from ..tasks.ready import polygonHalfPlanes
-
-    N, b = polygonHalfPlanes(vertices)
-    b = b - margin
-    k = len(b)
-    out = []
-    for i in range(k):
-        A = np.array([N[i - 1], N[i]])
-        if abs(np.linalg.det(A)) < 1e-12:
-            continue
-        p = np.linalg.solve(A, [b[i - 1], b[i]])
-        if (N @ p <= b + 1e-9).all():
-            out.append(p)
-    return np.array(out) if len(out) >= 3 else None

@@ -1,7 +1,9 @@
 """The robot tour: a humanoid waves its arms and turns its head while standing.
 
-``sotpy demo robot [--robot NAME] [--duration S] [--viewer] [--dt S]`` and
-``examples/robot_tour.py`` call :func:`run_robot_tour`, which builds this graph::
+:func:`run_robot_tour` is the story (``sotpy demo robot [--robot NAME] [--duration S]
+[--viewer] [--plot PATH] [--dt S]`` calls it; ``examples/robot_tour.py`` is the same
+story as a script to copy). It builds this graph, runs it, and hands the run to
+:class:`sotpy.demos.checks.TourLog` (the table and the checks)::
 
     robot = load_robot("talos", prefix="tour_talos")      # Dynamic + Device, half-sitting
     robot.device.setControlType("velocity")
@@ -53,9 +55,8 @@ from __future__ import annotations
 import difflib
 import fnmatch
 import math
-import re
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +65,6 @@ import pinocchio as pin
 
 from ..errors import CommandError, EntityError, SotpyError
 from ..graph import VECTOR, Entity, Output, command, plug, pool
-from . import Pacer, attach_viewer, detach_viewer
 
 __all__ = [
     "DEFAULT_AMPLITUDE",
@@ -435,20 +435,6 @@ class JointSineVelocity(Entity):
 
 
 # -- the story -------------------------------------------------------------------------
-def _free_prefix(robot: str | Path) -> str:
-    """``tour_<robot>``, or ``tour_<robot>_<k>`` when entities of that prefix exist."""
-    text = str(robot)
-    base = Path(text).stem if (text.endswith(".toml") or "/" in text or "\\" in text) else text
-    base = re.sub(r"[^A-Za-z0-9_-]", "_", base) or "robot"
-    suffixes = ("_dynamic", "_device", "_sine", "_viewer")
-    k = 1
-    while True:
-        prefix = f"tour_{base}" if k == 1 else f"tour_{base}_{k}"
-        if not any(pool.hasEntity(prefix + s) for s in suffixes):
-            return prefix
-        k += 1
-
-
 def _select_tour_joints(sine: JointSineVelocity, robot: Any) -> list[str]:
     """Humanoid: the chains to the wrists and the gaze, not the legs. Arm: every joint."""
     if not robot.feet:
@@ -470,78 +456,7 @@ def _select_tour_joints(sine: JointSineVelocity, robot: Any) -> list[str]:
     return joints
 
 
-def _xyz(p: np.ndarray) -> str:
-    return " ".join(f"{0.0 if abs(x) < 5e-7 else x:8.4f}" for x in p)
-
-
-def run_robot_tour(
-    robot: str | Path = "talos",
-    duration: float = 3.0,
-    dt: float = 1e-3,
-    viewer: bool = False,
-    quiet: bool = False,
-    *,
-    amplitude: float = DEFAULT_AMPLITUDE,
-    frequency: float = DEFAULT_FREQUENCY,
-    sleep: Callable[[float], None] = time.sleep,
-) -> dict[str, Any]:
-    """Load a robot and swing its arms and head (a whole arm) for ``duration`` seconds.
-
-    Loads ``robot`` with :func:`~sotpy.dynamics.load_robot` under a fresh prefix
-    (``tour_<robot>``, ``tour_<robot>_2``, ...: the pool is neither cleared nor clashed
-    with), sets its device to velocity control, and plugs into ``device.control`` a
-    :class:`JointSineVelocity` ``<prefix>_sine`` swinging, for a robot with feet, every
-    joint on the paths from the root to the op points of :data:`SWING_OP_POINTS` (wrists,
-    gaze) except those to :data:`STILL_OP_POINTS` (ankles) and the soles, and for a
-    robot without feet (an arm) every 1-DoF joint. It then calls ``device.increment(dt)``
-    ``round(duration / dt)`` times, printing each second the tick, the position of the
-    first op point of :data:`WRIST_OP_POINTS` and the CoM (both from the ``Dynamic``, m,
-    world frame), and checks at the end that
-
-    * the feet did not move: each sole's placement (from the ``Dynamic``) is the initial
-      one to :data:`FEET_TOLERANCE` (m and rad); robots without feet skip this check;
-    * no joint left its limits: ``device.boundsReport()`` counts no clamp;
-    * every coupled joint still follows its master (``robot.couplings``, to
-      :data:`COUPLING_TOLERANCE`).
-
-    With ``viewer``, a :class:`~sotpy.viewer.RobotViewer` ``<prefix>_viewer`` shows the
-    robot (its URL is printed), and the loop is paced at real time: after tick ``k`` it
-    sleeps until ``start + k dt``. The viewer is closed when the function returns or
-    raises (Ctrl-C included). The entities stay in the pool for inspection.
-
-    Args:
-        robot: a shipped robot's name (``sotpy robots``) or the path of a ``.toml``.
-        duration: simulated time, in s (> 0).
-        dt: time step, in s (> 0).
-        viewer: show the robot in a meshcat viewer, paced at real time.
-        quiet: print nothing.
-        amplitude: swing amplitude A, in rad (each joint's is limited, see
-            :class:`JointSineVelocity`).
-        frequency: swing frequency, in Hz.
-        sleep: the function that waits when paced (``time.sleep``).
-
-    Returns:
-        ``robot`` (name), ``prefix``, ``entities`` (names created), ``joints`` (those
-        that swing: selected, with ``A_j > 0``), ``amplitudes`` (``A_j``, size nv, rad),
-        ``ticks``, ``dt``, ``duration`` (s), ``wrist`` (the op point printed), ``path``
-        (n x 7: t [s], wrist xyz, CoM xyz, every 10 ms and at the end), ``wrist_travel``
-        (largest distance of the wrist from its start, m), ``feet_drift`` (largest sole
-        displacement, m or rad; None without feet), ``feet_fixed`` (bool, None without
-        feet), ``bounds`` (the ``boundsReport``), ``bounds_ok``, ``coupling_error`` (rad
-        or m), ``couplings_ok``, ``ok`` (every check holds), ``table`` (the text
-        printed), ``wall_time`` (s of the loop), ``viewer_url`` and ``viewer_pid`` (the
-        meshcat server's address and process id, None without viewer; the process has
-        ended on return) and ``late_ticks`` (paced ticks that ended more than one ``dt``
-        after their deadline).
-
-    Raises:
-        ValueError: ``duration`` or ``dt`` not finite and > 0, ``amplitude`` not finite
-            and >= 0, ``frequency`` not in ``(0, 1 / (2 dt))``.
-        sotpy.errors.SotpyError: unknown robot, broken description, a viewer that cannot
-            start, or a failing step.
-    """
-    from ..dynamics import load_robot
-
+def _check_arguments(duration: Any, dt: Any, amplitude: Any, frequency: Any) -> None:
     for what, value in (("duration", duration), ("dt", dt)):
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         if not (number and math.isfinite(value) and value > 0):
@@ -556,168 +471,137 @@ def run_robot_tour(
             f"run_robot_tour: frequency must be > 0 Hz and below the Nyquist frequency "
             f"1 / (2 dt) = {0.5 / dt:g} Hz, got {frequency!r}"
         )
+
+
+def run_robot_tour(
+    robot: str | Path = "talos",
+    duration: float = 3.0,
+    dt: float = 1e-3,
+    viewer: bool = False,
+    quiet: bool = False,
+    *,
+    amplitude: float = DEFAULT_AMPLITUDE,
+    frequency: float = DEFAULT_FREQUENCY,
+    plot: str | Path | None = None,
+    hold: float | None = 0.0,
+) -> dict[str, Any]:
+    """Load a robot and swing its arms and head (a whole arm) for ``duration`` seconds.
+
+    The story, top to bottom: load ``robot`` with :func:`~sotpy.dynamics.load_robot`
+    under a fresh prefix (``tour_<robot>``, ``tour_<robot>_2``, ...: the pool is neither
+    cleared nor clashed with), set its device to velocity control, plug into
+    ``device.control`` a :class:`JointSineVelocity` ``<prefix>_sine`` swinging, for a
+    robot with feet, every joint on the paths from the root to the op points of
+    :data:`SWING_OP_POINTS` (wrists, gaze) except those to :data:`STILL_OP_POINTS`
+    (ankles) and the soles, and for a robot without feet (an arm) every 1-DoF joint;
+    then call ``device.increment(dt)`` ``round(duration / dt)`` times. A
+    :class:`~sotpy.demos.checks.TourLog` prints each second the tick, the position of
+    the first op point of :data:`WRIST_OP_POINTS` and the CoM (both from the
+    ``Dynamic``, m, world frame), and checks at the end that
+
+    * the feet did not move: each sole's placement (from the ``Dynamic``) is the initial
+      one to :data:`FEET_TOLERANCE` (m and rad); robots without feet skip this check;
+    * no joint left its limits: ``device.boundsReport()`` counts no clamp;
+    * every coupled joint still follows its master (``robot.couplings``, to
+      :data:`COUPLING_TOLERANCE`).
+
+    With ``viewer``, a :class:`~sotpy.viewer.RobotViewer` ``<prefix>_viewer`` shows the
+    robot (its URL is printed) and, once the run is computed, replays it at real time
+    (:func:`sotpy.demos.replay`); it is closed when the function returns or raises
+    (Ctrl-C included). The entities stay in the pool for inspection.
+
+    Args:
+        robot: a shipped robot's name (``sotpy robots``) or the path of a ``.toml``.
+        duration: simulated time, in s (> 0).
+        dt: time step, in s (> 0).
+        viewer: show the robot in a meshcat viewer and replay the motion there.
+        quiet: print nothing.
+        amplitude: swing amplitude A, in rad (each joint's is limited, see
+            :class:`JointSineVelocity`).
+        frequency: swing frequency, in Hz.
+        plot: save a PNG there (:func:`sotpy.plotting.plot_robot_tour`).
+        hold: with ``viewer``, keep it up at most this many seconds after the run
+            (0: close it at once; None: until the page is closed or Ctrl-C).
+
+    Returns:
+        ``robot`` (name), ``prefix``, ``entities`` (names created), ``joints`` (those
+        that swing: selected, with ``A_j > 0``), ``amplitudes`` (``A_j``, size nv, rad),
+        ``ticks``, ``dt``, ``duration`` (s), ``wrist`` (the op point printed), ``path``
+        (n x 7: t [s], wrist xyz, CoM xyz, every 10 ms and at the end), ``q`` (the
+        configurations at the same times), ``limits`` (the swinging joints with finite
+        limits: ``joints``, ``index`` in q, ``lower``, ``upper``), ``wrist_travel``
+        (largest distance of the wrist from its start, m), ``feet_drift`` (largest sole
+        displacement, m or rad; None without feet), ``feet_fixed`` (bool, None without
+        feet), ``bounds`` (the ``boundsReport``), ``bounds_ok``, ``coupling_error`` (rad
+        or m), ``couplings_ok``, ``ok`` (every check holds), ``table`` (the text
+        printed), ``plot`` (path or None), ``wall_time`` (s of computation of the
+        loop), ``viewer_url`` and ``viewer_pid`` (the meshcat server's address and
+        process id, None without viewer; the process has ended on return).
+
+    Raises:
+        ValueError: ``duration`` or ``dt`` not finite and > 0, ``amplitude`` not finite
+            and >= 0, ``frequency`` not in ``(0, 1 / (2 dt))``.
+        sotpy.errors.SotpyError: unknown robot, broken description, a viewer that cannot
+            start, or a failing step.
+    """
+    from ..dynamics import load_robot
+    from ..plotting import plot_robot_tour
+    from . import open_viewer, replay
+    from .checks import TourLog, freePrefix
+
+    _check_arguments(duration, dt, amplitude, frequency)
     steps = max(1, round(duration / dt))
+    suffixes = ("{prefix}_dynamic", "{prefix}_device", "{prefix}_sine", "{prefix}_viewer")
+    prefix = freePrefix("tour", robot, suffixes)
+    emit = (lambda text: None) if quiet else (lambda text: print(text, flush=True))
+    known = {e.name for e in pool.entities()}
     lines: list[str] = []
 
-    def emit(text: str) -> None:
+    def say(text: str) -> None:
         lines.append(text)
-        if not quiet:
-            print(text, flush=True)
+        emit(text)
 
-    prefix = _free_prefix(robot)
-    r = load_robot(robot, prefix=prefix)
-    entities = [f"{prefix}_dynamic", f"{prefix}_device"]
-    device, dynamic = r.device, r.dynamic
-    device.setControlType("velocity")
+    # -- the graph ----------------------------------------------------------------------
+    r = load_robot(robot, prefix=prefix)  # Dynamic + Device at half-sitting
+    r.device.setControlType("velocity")
     sine = JointSineVelocity(f"{prefix}_sine", r.model, r.halfSitting, float(dt))
-    entities.append(sine.name)
     sine.setFrequency(float(frequency))
     sine.setAmplitude(float(amplitude))
-    selected = _select_tour_joints(sine, r)
+    selected = _select_tour_joints(sine, r)  # the arms and the head, not the legs
     amplitudes = sine.getAmplitudes()
     joints = [  # those that swing: a joint resting on a limit does not
         n for n in selected if amplitudes[r.model.joints[r.model.getJointId(n)].idx_v] > 0
     ]
-    t0 = max(device.state.time, 0)
-    sine.setStartTick(t0)
-    plug(sine.control, device.control)
+    sine.setStartTick(max(r.device.state.time, 0))
+    plug(sine.control, r.device.control)
 
-    wrist = next((op for op in WRIST_OP_POINTS if op in r.opPoints), None)
-    if wrist is None:
-        wrist = next(iter(r.opPoints), None)
-    if wrist is None:
-        raise SotpyError(f"robot tour: robot {r.name!r} has no op point to follow")
-    wristSig = dynamic.signal(wrist)
-    soles = {}
-    for side, foot in r.feet.items():
-        name = f"tour-{side}-sole"
-        dynamic.createPosition(name, foot.frame)
-        soles[side] = dynamic.signal(name)
-    sole0 = {side: sig(t0) for side, sig in soles.items()}
-    coupled = [(c.joint, c.master, c.multiplier, c.offset) for c in r.couplings.values()]
-
-    def coupling_residuals(q: np.ndarray) -> np.ndarray:
-        idx = {n: r.model.joints[r.model.getJointId(n)].idx_q for c in coupled for n in c[:2]}
-        return np.array([q[idx[j]] - (m * q[idx[mst]] + off) for j, mst, m, off in coupled])
-
-    res0 = coupling_residuals(device.state(t0))
-
-    every = max(1, round(1.0 / dt))
-    sample = max(1, round(0.01 / dt))
-    path: list[np.ndarray] = []
-
-    def record(t: int) -> np.ndarray:
-        row = np.concatenate(([(t - t0) * dt], wristSig(t).translation, dynamic.com(t)))
-        path.append(row)
-        return row
-
-    view = None
-    url = pid = None
-    wall = 0.0
+    # -- run it -------------------------------------------------------------------------
+    view = open_viewer(r, prefix, say) if viewer else None
     try:
-        if viewer:
-            view = attach_viewer(r, prefix)
-            entities.append(view.name)
-            url = view.url()
-            proc = view.serverProcess
-            pid = None if proc is None else proc.pid
-            emit(f"viewer: open {url} in a browser (the loop runs at real time)")
-        emit(
-            f"robot {r.name}: {len(joints)} joints swing by up to {sine.getAmplitude():g} rad at "
-            f"{sine.getFrequency():g} Hz (velocity control, dt = {dt:g} s, "
-            f"{steps} ticks): {', '.join(joints)}"
-        )
-        emit(f"{'tick':>7} {'t [s]':>7}  {wrist + ' x y z [m]':<26}  CoM x y z [m]")
-
-        def row(t: int, values: np.ndarray) -> None:
-            emit(f"{t:7d} {values[0]:7.3f}  {_xyz(values[1:4])}  {_xyz(values[4:7])}")
-
-        row(t0, record(t0))
-        pacer = Pacer(dt, sleep)
-        for k in range(1, steps + 1):
-            device.increment(dt)
-            t = t0 + k
-            if k % sample == 0 or k == steps:
-                values = record(t)
-                if k % every == 0 or k == steps:
-                    row(t, values)
-            if view is not None:
-                pacer.wait(k)
-        wall = pacer.elapsed()
-        late = pacer.late
+        log = TourLog(r, sine, steps, dt)
+        say(log.header(joints))
+        begin = time.perf_counter()
+        for _ in range(steps):
+            r.device.increment(dt)
+            row = log.record()
+            if row is not None:
+                say(row)
+        result = log.report(joints, wall_time=time.perf_counter() - begin)
+        for line in result["table"].splitlines():
+            say(line)
+        result["plot"] = None
+        if plot is not None:
+            plot_robot_tour(result, plot)
+            result["plot"] = str(plot)
+            say(f"plot: {plot}")
+        result["viewer_url"] = result["viewer_pid"] = None
         if view is not None:
-            view.flush(1.0)
+            result["viewer_url"] = view.url()
+            result["viewer_pid"] = view.serverProcess.pid
+            replay(view, result["q"], result["path"][1, 0] - result["path"][0, 0], hold, say)
     finally:
         if view is not None:
-            detach_viewer(r, view)
-
-    t_end = t0 + steps
-    q_end = device.state(t_end)
-    feet_drift = None
-    if soles:
-        drifts = []
-        for side, sig in soles.items():
-            m0, m1 = sole0[side], sig(t_end)
-            drifts.append(float(np.linalg.norm(m1.translation - m0.translation)))
-            drifts.append(float(np.linalg.norm(pin.log3(m0.rotation.T @ m1.rotation))))
-        feet_drift = max(drifts)
-    feet_fixed = None if feet_drift is None else feet_drift <= FEET_TOLERANCE
-    bounds = device.boundsReport()
-    clamped = sum(b["count"] for b in bounds.values())
-    coupling_error = float(np.max(np.abs(coupling_residuals(q_end) - res0), initial=0.0))
-    couplings_ok = coupling_error <= COUPLING_TOLERANCE
-    trajectory = np.array(path)
-    travel = float(np.max(np.linalg.norm(trajectory[:, 1:4] - trajectory[0, 1:4], axis=1)))
-
-    if feet_fixed is None:
-        emit("feet: none (fixed base)")
-    else:
-        sides = " and ".join(f"{s} sole" for s in soles)
-        emit(
-            f"feet: {sides} {'did not move' if feet_fixed else 'MOVED'} (largest drift "
-            f"{feet_drift:.1e} m or rad; tolerance {FEET_TOLERANCE:.0e})"
-        )
-    if clamped == 0:
-        emit("limits: no joint left its limits (boundsReport empty)")
-    else:
-        detail = "; ".join(
-            f"{kind}: {', '.join(f'{j} x{n}' for j, n in b['joints'].items())}"
-            for kind, b in bounds.items()
-            if b["count"]
-        )
-        emit(f"limits: {clamped} values CLAMPED ({detail})")
-    if coupled:
-        emit(
-            f"couplings: {len(coupled)} coupled joint(s) "
-            f"{'still follow' if couplings_ok else 'NO LONGER follow'} their master "
-            f"(largest error {coupling_error:.1e}; tolerance {COUPLING_TOLERANCE:.0e})"
-        )
-    emit(f"{r.name}'s {wrist} travelled up to {travel:.3f} m from its start")
-    if late:
-        emit(f"{late} of {steps} ticks ended more than dt after their real-time deadline")
-
-    return {
-        "robot": r.name,
-        "prefix": prefix,
-        "entities": entities,
-        "joints": joints,
-        "amplitudes": amplitudes,
-        "ticks": steps,
-        "dt": float(dt),
-        "duration": steps * float(dt),
-        "wrist": wrist,
-        "path": trajectory,
-        "wrist_travel": travel,
-        "feet_drift": feet_drift,
-        "feet_fixed": feet_fixed,
-        "bounds": bounds,
-        "bounds_ok": clamped == 0,
-        "coupling_error": coupling_error,
-        "couplings_ok": couplings_ok,
-        "ok": feet_fixed is not False and clamped == 0 and couplings_ok,
-        "table": "\n".join(lines),
-        "wall_time": wall,
-        "viewer_url": url,
-        "viewer_pid": pid,
-        "late_ticks": late,
-    }
+            view.close()
+    result["table"] = "\n".join(lines)
+    result["entities"] = [e.name for e in pool.entities() if e.name not in known]
+    return result

@@ -86,23 +86,14 @@ def run_panda_torque(
         "times": np.array(times),
         "torques": np.array(torques),
         "errors": np.array(errors),
+        "joint_names": list(robot.model.names)[-len(limits) :],
+        "torque_limits": np.array(limits),
         "plot": None,
     }
     if plot is not None:
-        import matplotlib
+        from ..plotting import plot_panda_torque
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-        ax[0].plot(out["times"], out["torques"])
-        ax[0].set_ylabel("torque (N m)")
-        ax[1].plot(out["times"], 1e3 * out["errors"])
-        ax[1].set_ylabel("tracking error (mm)")
-        ax[1].set_xlabel("time (s)")
-        fig.tight_layout()
-        fig.savefig(plot)
-        plt.close(fig)
+        plot_panda_torque(out, plot)
         out["plot"] = str(plot)
     return out
 
@@ -312,40 +303,16 @@ def run_talos_torque(
         "com_goal": com_goal,
         "wrenches": wrenches,
         "torques": torques,
+        "side": side,
+        "soles": [{"length": f.length, "width": f.width, "offset": f.offset[:2]} for f in feet],
         "plot": None,
     }
     if plot is not None:
-        out["plot"] = _plot_talos(out, plot)
+        from ..plotting import plot_talos_torque
+
+        plot_talos_torque(out, plot)
+        out["plot"] = str(plot)
     return out
-
-
-def _plot_talos(out: dict[str, Any], path: str | Path) -> str:
-    """Contact forces (normal force and CoP of each sole) and the CoM, saved as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t, w = out["times"], out["wrenches"]
-    fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    for i, side in enumerate(("left", "right")):
-        ax[0].plot(t, w[:, i, 2], label=f"{side} f_z")
-        ax[0].plot(t, np.hypot(w[:, i, 0], w[:, i, 1]), "--", label=f"{side} |f_xy|")
-        ax[1].plot(t, 1e3 * -w[:, i, 4] / w[:, i, 2], label=f"{side} CoP x")
-        ax[1].plot(t, 1e3 * w[:, i, 3] / w[:, i, 2], "--", label=f"{side} CoP y")
-    ax[0].set_ylabel("contact force (N, sole frame)")
-    ax[1].set_ylabel("CoP in the sole frame (mm)")
-    for j, axis in enumerate("xyz"):
-        ax[2].plot(t, 1e3 * (out["com"][:, j] - out["com"][0, j]), label=f"CoM {axis}")
-        ax[2].axhline(1e3 * (out["com_goal"][j] - out["com"][0, j]), ls=":", color="gray")
-    ax[2].set_ylabel("CoM - start (mm, world)")
-    ax[2].set_xlabel("time (s)")
-    for a in ax:
-        a.legend(loc="best", fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return str(path)
 
 
 def run_callbacks(
