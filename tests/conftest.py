@@ -84,6 +84,40 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
     pytest.skip(text)
 
 
+def check_figure(fig, title: str) -> dict[str, dict]:
+    """The checks every demo figure passes: a title containing ``title``; on every axis
+    a title, an x label, a y label with a unit in brackets that is not both metres and
+    radians, a grid-free check aside, and a legend naming every labelled line. Returns
+    ``{axis title: {"ylabel": ..., "legend": [texts], "lines": {label: line}}}``."""
+    assert fig._suptitle is not None and title in fig._suptitle.get_text()
+    out = {}
+    for ax in fig.axes:
+        name = ax.get_title()
+        assert name, "an axis without a title"
+        ylabel = ax.get_ylabel()
+        assert "[" in ylabel and "]" in ylabel, f"{name}: no unit in {ylabel!r}"
+        assert not ("m]" in ylabel and "rad" in ylabel), f"{name}: mixes m and rad"
+        legend = ax.get_legend()
+        assert legend is not None, f"{name}: no legend"
+        texts = [t.get_text() for t in legend.get_texts()]
+        labelled = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
+        assert labelled and [ln.get_label() for ln in labelled] == texts
+        out[name] = {
+            "ylabel": ylabel,
+            "legend": texts,
+            "lines": {ln.get_label(): ln for ln in labelled},
+        }
+    bottom = [ax for ax in fig.axes if ax.get_xlabel()]
+    assert bottom, "no x label"
+    return out
+
+
+@pytest.fixture
+def figure_check():
+    """:func:`check_figure`, for the tests of the demos' figures."""
+    return check_figure
+
+
 @pytest.fixture(autouse=True)
 def _clear_pool():
     """Clear the pool (entities, clock) before and after each test."""

@@ -104,3 +104,46 @@ def test_plot_tracer_bad_input(tmp_path):
         plot_tracer({"time": np.zeros(0), "x": np.zeros((0, 1))})
     with pytest.raises(SotpyError, match="npz"):
         plot_tracer(tmp_path / "missing.npz")
+
+
+# -- the torque demos' figures -----------------------------------------------------------
+def test_panda_torque_figure_names_each_joint_and_its_limits(figure_check, tmp_path):
+    from sotpy.demos.torque import run_panda_torque
+    from sotpy.plotting import plot_panda_torque
+
+    out = run_panda_torque(duration=0.1, settle=0.02, plot=tmp_path / "panda.png")
+    assert (tmp_path / "panda.png").read_bytes()[:8] == PNG
+    axes = figure_check(plot_panda_torque(out), "Panda")
+    names = [f"panda_joint{i}" for i in range(1, 8)]
+    torques, ratios = axes["joint torques"], axes["torques against their limits"]
+    assert names <= list(torques["lines"]) and len(torques["lines"]) == out["torques"].shape[1]
+    assert torques["ylabel"] == "torque [N m]"
+    limits = load_robot("panda").model.effortLimit  # Pinocchio's, independent of the demo
+    for k, name in enumerate(names):
+        np.testing.assert_allclose(
+            ratios["lines"][name].get_ydata(), out["torques"][:, k] / limits[k]
+        )
+    assert list(ratios["lines"]["torque limits"].get_ydata()) == [1.0, 1.0]
+    error = axes["hand position error"]
+    assert list(error["lines"]["final-error goal 1 mm"].get_ydata()) == [1.0, 1.0]
+
+
+def test_talos_torque_figure_labels_the_goals_and_the_soles(figure_check, tmp_path):
+    from sotpy.demos.torque import run_talos_torque
+    from sotpy.plotting import plot_talos_torque
+
+    out = run_talos_torque(duration=0.7, settle=0.05, plot=tmp_path / "talos.png")
+    assert (tmp_path / "talos.png").read_bytes()[:8] == PNG
+    axes = figure_check(plot_talos_torque(out), "Talos")
+    com = axes["centre of mass (world)"]
+    for j, axis in enumerate("xyz"):
+        goal = 1e3 * (out["com_goal"][j] - out["com"][0, j])
+        assert com["lines"][f"goal {axis}"].get_ydata()[0] == pytest.approx(goal)
+    cop = axes["centres of pressure in the soles (from each sole's centre)"]
+    foot = load_robot("talos", prefix="t2").feet["left"]
+    label = f"sole edges x: ±{500 * foot.length:.0f} mm"
+    assert cop["lines"][label].get_ydata()[0] == pytest.approx(500 * foot.length)
+    forces = axes["contact forces (sole frames)"]
+    np.testing.assert_array_equal(
+        forces["lines"]["left f_z (normal)"].get_ydata(), out["wrenches"][:, 0, 2]
+    )

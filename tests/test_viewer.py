@@ -450,3 +450,95 @@ def test_page_renders_talos_at_half_sitting(viewers, talos, tmp_path):
     # the robot is mostly grey and black, the background blue
     red, blue = img[differs][:, 0], img[differs][:, 2]
     assert np.mean(np.abs(red - blue) < 0.1) > 0.5
+
+
+# -- watching a demo: the camera on the robot, the motion replayed, the page's life ------
+def test_frame_robot_and_animate_check_their_arguments(viewers, humanoid):
+    model, geometry = humanoid
+    v = viewers("viewer", model, geometry)
+    with pytest.raises(SotpyError, match=r"RobotViewer\(viewer\)\.frameRobot: q must be"):
+        v.frameRobot(np.zeros(3))
+    with pytest.raises(SotpyError, match="fill must be a fraction"):
+        v.frameRobot(None, 2.0)
+    with pytest.raises(SotpyError, match=r"animate: configurations must be .* k x 35"):
+        v.animate(np.zeros((4, 3)), 0.02)
+    with pytest.raises(SotpyError, match="dt must be"):
+        v.animate(np.tile(pin.neutral(model), (2, 1)), 0.0)
+    # the centre is the middle of the geometries' box at q (here the neutral posture)
+    centre = v.frameRobot()
+    lo, hi = viewer_module._visualBox(model, geometry, pin.neutral(model))
+    np.testing.assert_allclose(centre, 0.5 * (lo + hi))
+    assert v.animate(np.tile(pin.neutral(model), (6, 1)), 0.02) == pytest.approx(0.1)
+    assert v.pages() == 0 and not v.waitPages(timeout=0.1)  # no page was ever opened
+
+
+def test_visual_box_holds_every_mesh_vertex(talos):
+    """The box of frameRobot, against the vertices of Talos's meshes placed by
+    Pinocchio (independent of the AABBs it is computed from): every vertex inside, and
+    the box no more than 5 cm larger than the vertices' own box (a mesh's local box,
+    turned by its placement, is larger than the mesh: 3 cm on Talos's arms)."""
+    model, visual = talos.model, talos.visual_model
+    q = model.referenceConfigurations["half_sitting"]
+    lo, hi = viewer_module._visualBox(model, visual, q)
+    data, gdata = model.createData(), pin.GeometryData(visual)
+    pin.forwardKinematics(model, data, q)
+    pin.updateGeometryPlacements(model, data, visual, gdata)
+    points = []
+    for obj, M in zip(visual.geometryObjects, gdata.oMg, strict=True):
+        vertices = getattr(obj.geometry, "vertices", None)
+        if vertices is None:
+            continue
+        local = np.asarray(obj.geometry.vertices()) * np.asarray(obj.meshScale)
+        points.append(local @ M.rotation.T + M.translation)
+    points = np.vstack(points)
+    assert len(points) > 1000
+    assert (points >= lo - 1e-9).all() and (points <= hi + 1e-9).all()
+    np.testing.assert_allclose(lo, points.min(axis=0), atol=0.05)
+    np.testing.assert_allclose(hi, points.max(axis=0), atol=0.05)
+    assert 1.6 < hi[2] - lo[2] < 1.8  # Talos is 1.7 m tall at half-sitting
+
+
+# the page's state: how many animation tracks it plays, for how long, whether it plays
+_ANIMATION = (
+    "(() => { const a = viewer.animator; return {actions: a.actions.length,"
+    " duration: a.duration, playing: a.playing}; })()"
+)
+
+
+@pytest.mark.needs("chromium")
+def test_page_frames_nao_and_plays_the_motion(viewers, tmp_path):
+    """What a user sees in the browser: Nao framed by frameRobot (it filled 70 px of a
+    600 px view with meshcat's default camera), the motion sent by animate playing in
+    the page, and the page's visit seen by the server (waitPages)."""
+    from matplotlib.image import imread
+
+    from sotpy.dynamics import load_robot
+
+    robot = load_robot("nao")
+    model, visual = robot.model, robot.visual_model
+    v = viewers("nao_viewer", model, visual)
+    q0 = robot.halfSitting
+    with v.lock:
+        v.viz.display(q0)
+    v.frameRobot(q0)
+    motion = np.tile(q0, (51, 1))
+    motion[:, model.joints[model.getJointId("HeadYaw")].idx_q] += np.linspace(0, 0.5, 51)
+    assert v.animate(motion, 0.02) == pytest.approx(1.0)
+    png, state = viewer_module._renderPage(
+        "test", v.url(), 800, 600, len(visual.geometryObjects), 90.0, probe=_ANIMATION
+    )
+    assert state["actions"] == len(visual.geometryObjects)  # one track per mesh
+    assert state["duration"] == pytest.approx(1.0, abs=1e-6) and state["playing"]
+    assert v.waitPages(timeout=10.0)  # Chromium opened the page and left it
+    # Nao against an empty scene framed the same way: its height on the screen
+    (tmp_path / "nao.png").write_bytes(png)
+    empty = viewers("empty_viewer", model, pin.GeometryModel())
+    with empty.lock:  # the empty scene has no box: moved and seen as Nao's
+        for node in (empty.viz.viewerRootNodeName, "/Grid", "/Axes"):
+            empty.viz.viewer[node].set_transform(pin.SE3(np.eye(3), -v._centre).homogeneous)
+    empty.setCameraPosition(v._cameraPosition)
+    reference = imread(empty.snapshot(str(tmp_path / "empty.png"), timeout=60.0))[:, :, :3]
+    img = imread(str(tmp_path / "nao.png"))[:, :, :3]
+    differs = np.abs(img - reference).max(axis=2) > 0.1
+    rows = np.nonzero(differs.any(axis=1))[0]
+    assert rows.max() - rows.min() > 0.5 * 600  # more than half the view's height

@@ -462,6 +462,7 @@ class RobotViewer(Entity):
         self._warned = False
         self._lastQ: np.ndarray | None = None
         self._centre = np.zeros(3)
+        self._cameraPosition = np.array([3.0, 0.0, 1.0])  # meshcat's default
         self._io = threading.Lock()  # one ZeroMQ exchange at a time (REQ socket)
         if not isinstance(model, pin.Model):
             raise EntityError(f"{who}: model must be a pinocchio.Model, got {type(model)}")
@@ -647,7 +648,8 @@ class RobotViewer(Entity):
             for node in (self._viz.viewerRootNodeName, "/Grid", "/Axes"):
                 viewer[node].set_transform(shift)
         self._centre = centre
-        self.setCameraPosition(distance * direction)
+        self._cameraPosition = distance * direction
+        self.setCameraPosition(self._cameraPosition)
         return centre
 
     @command

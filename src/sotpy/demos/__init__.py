@@ -93,11 +93,11 @@ def replay(
     import numpy as np
 
     qs = np.asarray(configurations)
-    step = max(1, round(VIEWER_FRAME / dt))
-    frames = qs[::step]
-    if (len(qs) - 1) % step:
-        frames = np.vstack((frames, qs[-1:]))  # the last configuration too
-    duration = view.animate(frames, step * dt)
+    # about VIEWER_FRAME s apart, evenly spaced from the first row to the last
+    count = max(2, round((len(qs) - 1) * dt / VIEWER_FRAME) + 1) if len(qs) > 1 else 1
+    rows = np.round(np.linspace(0, len(qs) - 1, count)).astype(int)
+    frame = (len(qs) - 1) * dt / (count - 1) if count > 1 else dt
+    duration = view.animate(qs[rows], frame)
     motion = f"the page replays the {duration:.2f} s motion at real time, again and again"
     if hold is not None and hold <= 0:
         emit(f"viewer: {motion}; closing now (--hold 0)")

@@ -379,6 +379,11 @@ class TourLog:
         from .robot_tour import WRIST_OP_POINTS
 
         self.robot, self.sine, self.steps, self.dt = robot, sine, steps, dt
+        model, amplitudes = robot.model, sine.getAmplitudes()
+        #: the selected joints that swing (a joint resting on a limit does not)
+        self.joints = [
+            n for n in sine.getJoints() if amplitudes[model.joints[model.getJointId(n)].idx_v] > 0
+        ]
         dyn = robot.dynamic
         self.t0 = t0 = max(robot.device.state.time, 0)
         wrist = next((op for op in WRIST_OP_POINTS if op in robot.opPoints), None)
@@ -420,9 +425,9 @@ class TourLog:
         self.q.append(np.array(self.robot.device.state(t)))
         return row
 
-    def header(self, joints: Sequence[str]) -> str:
+    def header(self) -> str:
         """What swings, and the table's header with its first row (tick 0)."""
-        sine = self.sine
+        sine, joints = self.sine, self.joints
         first = self.path[0]
         return (
             f"robot {self.robot.name}: {len(joints)} joints swing by up to "
@@ -446,12 +451,12 @@ class TourLog:
                 return self._row(t, values)
         return None
 
-    def report(self, joints: Sequence[str], wall_time: float = 0.0) -> dict[str, Any]:
+    def report(self, wall_time: float = 0.0) -> dict[str, Any]:
         """Check the run: the result of :func:`~sotpy.demos.robot_tour.run_robot_tour`
         (its docstring lists the keys), ``table`` holding the verdicts to print."""
         from .robot_tour import COUPLING_TOLERANCE, FEET_TOLERANCE
 
-        r, device = self.robot, self.robot.device
+        r, device, joints = self.robot, self.robot.device, self.joints
         t_end = self.t0 + self.k
         q_end = device.state(t_end)
         feet_drift = None

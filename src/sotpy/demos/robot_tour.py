@@ -567,11 +567,7 @@ def run_robot_tour(
     sine = JointSineVelocity(f"{prefix}_sine", r.model, r.halfSitting, float(dt))
     sine.setFrequency(float(frequency))
     sine.setAmplitude(float(amplitude))
-    selected = _select_tour_joints(sine, r)  # the arms and the head, not the legs
-    amplitudes = sine.getAmplitudes()
-    joints = [  # those that swing: a joint resting on a limit does not
-        n for n in selected if amplitudes[r.model.joints[r.model.getJointId(n)].idx_v] > 0
-    ]
+    _select_tour_joints(sine, r)  # the arms and the head, not the legs
     sine.setStartTick(max(r.device.state.time, 0))
     plug(sine.control, r.device.control)
 
@@ -579,14 +575,14 @@ def run_robot_tour(
     view = open_viewer(r, prefix, say) if viewer else None
     try:
         log = TourLog(r, sine, steps, dt)
-        say(log.header(joints))
+        say(log.header())
         begin = time.perf_counter()
         for _ in range(steps):
             r.device.increment(dt)
             row = log.record()
             if row is not None:
                 say(row)
-        result = log.report(joints, wall_time=time.perf_counter() - begin)
+        result = log.report(wall_time=time.perf_counter() - begin)
         for line in result["table"].splitlines():
             say(line)
         result["plot"] = None

@@ -189,8 +189,8 @@ class Robot:
 
         The module is imported here, on first use, not at the top of this file: the
         tasks layer imports the dynamics layer, and the dynamics layer must not import
-        the tasks layer at module level (:doc:`docs/architecture.md </architecture>`), so that loading a robot does not
-        need (or create) any task.
+        the tasks layer at module level (the layers of :doc:`docs/architecture.md
+        </architecture>`), so that loading a robot does not need (or create) any task.
         """
         ready = self.__dict__.get("_readyTasks")
         if ready is None:
