@@ -1,7 +1,7 @@
 """The Panda follows a minimum-jerk Cartesian trajectory in torque mode (ORCA-style
 whole-body controller with torque, position and velocity limits).
 
-    /tmp/venv/bin/python examples/panda_torque.py [--plot panda_torque.png]
+    python examples/panda_torque.py [--plot panda_torque.png]
 """
 
 from __future__ import annotations

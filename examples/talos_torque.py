@@ -3,7 +3,7 @@ hand, in torque mode (ORCA-style whole-body controller: unilateral 6-D foot cont
 friction pyramids and CoP constraints, CoM, hand and posture tasks, torque and position
 limits; the Device simulates the contacts).
 
-    /tmp/venv/bin/python examples/talos_torque.py [--side left] [--plot talos_torque.png]
+    python examples/talos_torque.py [--side left] [--plot talos_torque.png]
 """
 
 from __future__ import annotations

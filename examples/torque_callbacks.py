@@ -2,7 +2,7 @@
 constraints: every callback (onActivation, onComputeBegin, onComputeEnd, onActivated,
 onDeactivation, onDeactivated) prints a line, with the tick and the ramp.
 
-    /tmp/venv/bin/python examples/torque_callbacks.py [--no-compute]
+    python examples/torque_callbacks.py [--no-compute]
 """
 
 from __future__ import annotations

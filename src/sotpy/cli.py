@@ -144,7 +144,14 @@ def _robots_run(args: argparse.Namespace) -> int:
 
     rows = [("robot", "nv", "actuated", "base", "source", "operational points")]
     failed = 0
-    for name in list_robots():
+    names = list_robots()
+    print(  # on stderr, so that the table alone goes to stdout
+        f"sotpy robots: loading the {len(names)} shipped models ({', '.join(names)}) to "
+        "count their joints; a few seconds...",
+        file=sys.stderr,
+        flush=True,
+    )
+    for name in names:
         try:
             s = robot_summary(name)
         except RobotError as exc:
@@ -185,9 +192,19 @@ def add_robots(subparsers: Any) -> None:
 # -- shell, serve, connect -------------------------------------------------------------
 def _robot_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "robot", nargs="?", default="talos", metavar="ROBOT", help="robot (sotpy robots)"
+        "robot",
+        nargs="?",
+        default="talos",
+        metavar="ROBOT",
+        help="a robot listed by 'sotpy robots', or a .toml description (default talos)",
     )
-    p.add_argument("--dt", type=positive_float, default=1e-3, metavar="S", help="loop period, s")
+    p.add_argument(
+        "--dt",
+        type=positive_float,
+        default=1e-3,
+        metavar="S",
+        help="loop period and time step, s (default 0.001: 1 kHz)",
+    )
 
 
 def _shell_run(args: argparse.Namespace) -> int:
@@ -217,7 +234,12 @@ def add_shell(subparsers: Any) -> None:
         "helpers start(), stop(), step(n), stats(), writeGraph(path). See docs/shell.md.",
     )
     _robot_arg(p)
-    p.add_argument("--no-ipython", action="store_true", help="use the standard console")
+    p.add_argument(
+        "--no-ipython",
+        action="store_true",
+        help="use Python's standard console (default: IPython when installed, "
+        "pip install 'sotpy[shell]')",
+    )
     p.set_defaults(func=_shell_run)
 
 
@@ -244,7 +266,10 @@ def _serve_run(args: argparse.Namespace) -> int:
         return 1
     loop = ns["loop"]
 
+    why = ["an error"]
+
     def _terminate(signum: int, frame: Any) -> None:
+        why[0] = "SIGTERM"
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, _terminate)
@@ -255,17 +280,18 @@ def _serve_run(args: argparse.Namespace) -> int:
         host, port = server.address
         print(
             f"sotpy serve: {args.robot} loop {'paused' if args.paused else 'running'} at "
-            f"{1 / args.dt:g} Hz; remote interpreter on {host}:{port}; token in {path}",
+            f"{1 / args.dt:g} Hz; remote interpreter on {host}:{port}; token in {path}; "
+            "Ctrl-C or SIGTERM stops it",
             flush=True,
         )
         while True:
             time.sleep(3600)  # SIGINT/SIGTERM raise KeyboardInterrupt here
     except KeyboardInterrupt:
-        pass
+        why[0] = "Ctrl-C" if why[0] == "an error" else why[0]
     finally:
         server.stop()
         loop.stop()
-        print(f"sotpy serve: stopped\n{loop.stats()}", flush=True)
+        print(f"sotpy serve: stopped by {why[0]}; loop statistics:\n{loop.stats()}", flush=True)
     return 0
 
 

@@ -22,22 +22,159 @@ their signals and commands are attributes, so ``talos_device.<TAB>`` lists them)
 input runs while holding :attr:`pool.lock <sotpy.graph.pool.Pool.lock>`: the loop
 never ticks in the middle of an input. Before each prompt the console prints a loop
 fault that happened since the last input.
+
+Completion (:class:`Completer`, the same in IPython, in the plain console and in
+``sotpy connect``): inside the string argument of ``entity.signal("``,
+``entity.hasSignal("``, ``pool.getEntity("`` / ``hasEntity("`` and after
+``mapping["`` (``robot.tasks["``, ``robot.opPoints["``), Tab completes the names that
+exist, dashed ones included (``right-wrist``, ``end-effector``), which Python's
+completer cannot reach (it stops at the dash and offers keywords). A signal is offered
+as ``com``, not as the call ``com(``: reading it is ``com.value``; calling it needs a
+tick.
 """
 
 from __future__ import annotations
 
 import code
+import re
+import rlcompleter
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from .graph import plug, pool
 from .graph.dot import writeGraph as _writeGraph
+from .graph.signal import Signal
 from .loop import ControlLoop, unlocked
 
-__all__ = ["LockedConsole", "interact", "makeNamespace"]
+__all__ = [
+    "Completer",
+    "LockedConsole",
+    "interact",
+    "ipythonMatcher",
+    "ipythonShell",
+    "makeNamespace",
+    "stringCompletions",
+]
+
+# the text before the cursor ends inside a string literal, argument of one of these
+_CALL = re.compile(
+    r"(?P<obj>[A-Za-z_][\w.]*)\.(?P<method>signal|hasSignal|getEntity|hasEntity)\(\s*"
+    r"(?P<quote>['\"])(?P<typed>[^'\"]*)$"
+)
+_KEY = re.compile(r"(?P<obj>[A-Za-z_][\w.]*)\[\s*(?P<quote>['\"])(?P<typed>[^'\"]*)$")
+
+
+def _resolve(namespace: Mapping[str, Any], dotted: str) -> Any:
+    """The object a dotted name denotes in ``namespace`` (attributes only, no call and
+    no evaluation), or None."""
+    head, *rest = dotted.split(".")
+    if head not in namespace:
+        return None
+    obj = namespace[head]
+    for attr in rest:
+        try:
+            obj = getattr(obj, attr)
+        except Exception:  # a property that raises: no completion
+            return None
+    return obj
+
+
+def stringCompletions(namespace: Mapping[str, Any], line: str) -> tuple[str, list[str]] | None:
+    """Names for the string literal the text before the cursor (``line``) ends in.
+
+    ``x.signal("..`` and ``x.hasSignal("..``: the names of entity ``x``'s signals (of
+    every entity of the pool when ``x`` cannot be resolved without evaluating code);
+    ``pool.getEntity("..`` and ``hasEntity``: the pool's entity names; ``x["..`` with
+    ``x`` a mapping with string keys: its keys. Returns ``(typed, names)``: what is
+    typed inside the quotes and the full names that start with it, sorted; None
+    elsewhere.
+    """
+    m = _CALL.search(line)
+    if m is not None:
+        typed = m["typed"]
+        if m["method"] in ("getEntity", "hasEntity"):
+            names = [e.name for e in pool.entities()]
+        else:
+            obj = _resolve(namespace, m["obj"])
+            if obj is not None and hasattr(obj, "signals") and hasattr(obj, "className"):
+                names = [sig.shortName for sig in obj.signals()]
+            else:
+                names = sorted({sig.shortName for e in pool.entities() for sig in e.signals()})
+        return typed, sorted(n for n in names if n.startswith(typed))
+    m = _KEY.search(line)
+    if m is not None:
+        obj = _resolve(namespace, m["obj"])
+        if isinstance(obj, Mapping):
+            typed = m["typed"]
+            keys = [k for k in obj if isinstance(k, str) and k.startswith(typed)]
+            return typed, sorted(keys)
+    return None
+
+
+class Completer(rlcompleter.Completer):
+    """Python's completer over ``namespace``, with the names of signals, entities and
+    mapping keys inside string literals (:func:`stringCompletions`), and signals
+    offered as names rather than calls.
+
+    :meth:`completions` serves readline (the plain console, ``sotpy connect``), whose
+    word stops at a dash: for ``dyn.signal("right-w`` readline's word is ``w``, and
+    the matches are ``wrist``, the rest of ``right-wrist``."""
+
+    def _callable_postfix(self, val: Any, word: str) -> str:
+        if isinstance(val, Signal):  # read with .value; calling needs a tick
+            return word
+        return super()._callable_postfix(val, word)
+
+    def completions(self, text: str, line: str | None = None) -> list[str]:
+        """Completions of readline's word ``text``; ``line``: the text before the
+        cursor (default ``text``)."""
+        found = stringCompletions(self.namespace, text if line is None else line)
+        if found is not None:
+            typed, names = found
+            cut = len(typed) - len(text)  # readline replaces its word only
+            if cut < 0 or not typed.endswith(text):
+                return names
+            return [n[cut:] for n in names]
+        out: list[str] = []
+        for i in range(1000):
+            m = self.complete(text, i)
+            if m is None:
+                break
+            out.append(m)
+        return out
+
+    def readline(self, text: str, state: int) -> str | None:
+        """A readline completer (``readline.set_completer(c.readline)``)."""
+        if state == 0:
+            import readline
+
+            line = readline.get_line_buffer()[: readline.get_endidx()]
+            self._found = self.completions(text, line)
+        m = getattr(self, "_found", [])
+        return m[state] if state < len(m) else None
+
+
+def ipythonMatcher(namespace: Mapping[str, Any]) -> Any:
+    """An IPython matcher (API v2, ``shell.Completer.custom_matchers``) completing the
+    names of :func:`stringCompletions`; it hides IPython's other completions there."""
+    from IPython.core.completer import SimpleCompletion, context_matcher
+
+    @context_matcher()
+    def sotpy_names(context: Any) -> dict[str, Any]:
+        found = stringCompletions(namespace, context.text_until_cursor)
+        if found is None or not found[1]:
+            return {"completions": []}
+        typed, names = found
+        return {
+            "completions": [SimpleCompletion(n, type="sotpy") for n in names],
+            "matched_fragment": typed,
+            "suppress": True,
+        }
+
+    return sotpy_names
 
 
 def makeNamespace(robot: str | None = "talos", dt: float = 1e-3) -> dict[str, Any]:
@@ -130,32 +267,42 @@ def _banner(ns: dict[str, Any]) -> str:
     )
 
 
+def ipythonShell(ns: dict[str, Any]) -> Any:
+    """The IPython console of :func:`interact` (not started): each cell runs holding
+    ``pool.lock``, our banner then IPython's own line, and the names of
+    :func:`stringCompletions` offered by its completer. Raises ImportError without
+    IPython."""
+    from IPython.terminal.embed import InteractiveShellEmbed
+
+    # IPython appends its own line (a tip) to banner1: end ours with a blank line
+    shell = InteractiveShellEmbed(user_ns=ns, banner1=_banner(ns) + "\n\n")
+    shell.Completer.custom_matchers.append(ipythonMatcher(ns))
+    original: Callable[..., Any] = shell.run_cell
+
+    def run_cell(*args: Any, **kwargs: Any) -> Any:
+        with pool.lock:
+            return original(*args, **kwargs)
+
+    shell.run_cell = run_cell  # type: ignore[method-assign]
+    return shell
+
+
 def interact(ns: dict[str, Any], ipython: bool | None = None) -> None:
     """Run the console over ``ns`` (IPython if installed and ``ipython`` is not False)."""
-    banner = _banner(ns)
     if ipython is not False:
         try:
-            from IPython.terminal.embed import InteractiveShellEmbed
+            shell = ipythonShell(ns)
         except ImportError:
             if ipython:
                 raise
-        else:  # pragma: no cover - IPython is optional
-            shell = InteractiveShellEmbed(user_ns=ns, banner1=banner)
-            original: Callable[..., Any] = shell.run_cell
-
-            def run_cell(*args: Any, **kwargs: Any) -> Any:
-                with pool.lock:
-                    return original(*args, **kwargs)
-
-            shell.run_cell = run_cell  # type: ignore[method-assign]
+        else:  # pragma: no cover - interactive
             shell()
             return
     try:
         import readline
-        import rlcompleter
 
-        readline.set_completer(rlcompleter.Completer(ns).complete)
+        readline.set_completer(Completer(ns).readline)
         readline.parse_and_bind("tab: complete")
     except ImportError:  # pragma: no cover - Windows
         pass
-    LockedConsole(ns).interact(banner=banner, exitmsg="")
+    LockedConsole(ns).interact(banner=_banner(ns), exitmsg="")

@@ -472,6 +472,16 @@ def torque_callbacks_run(args: argparse.Namespace) -> int:
     from ..errors import SotpyError
     from .torque import run_callbacks
 
+    shown = "" if args.no_compute else ", onComputeBegin / onComputeEnd at every tick"
+    print(  # on stderr: stdout holds the callbacks' lines only
+        "torque-callbacks: the Panda in torque mode with a hand task 'ee' (ramp 2 ms), a "
+        "posture task 'posture' (ramp 3 ms) and a torque limit 'torque' (no ramp); "
+        "activateTasksAndConstraints() at tick 0, deactivateTasksAndConstraints() once "
+        "all are active. Each callback prints: tick, time, object, callback, ramp (0 to "
+        f"1){shown}.",
+        file=sys.stderr,
+        flush=True,
+    )
     try:
         run_callbacks(compute=not args.no_compute)
     except SotpyError as exc:
