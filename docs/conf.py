@@ -60,6 +60,7 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(numpy|np|pinocchio|pin|scipy|meshcat|proxsuite|daqp|matplotlib)(\..*)?"),
     (r"py:.*", r"(typing|collections|threading|socket|socketserver|code|pathlib|os|io)\..*"),
     (r"py:.*", r"(argparse|logging|subprocess|types|enum|dataclasses|abc|json)\..*"),
+    (r"py:.*", r"rlcompleter\..*"),  # the base of sotpy.shell.Completer
     (r"py:class", r"(\w+\.)*(Path|Callable|Iterable|Iterator|Sequence|Mapping|Any|ndarray)"),
     (r"py:class", r"(\w+\.)*(ClassVar|Literal|TextIO|Self)"),  # Sphinx 7 qualifies them
     (r"py:class", r"_thread\..*"),

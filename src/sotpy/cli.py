@@ -3,8 +3,9 @@
 ::
 
     sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S]
-    sotpy demo robot [--robot NAME] [--duration S] [--viewer] [--dt S]
-    sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer]
+    sotpy demo robot [--robot NAME] [--duration S] [--viewer [--hold S]] [--dt S]
+                     [--plot PATH]
+    sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer [--hold S]]
                                [--target-offset X Y Z] [--margin M] [--damping L]
     sotpy demo panda-torque [--duration S] [--strategy NAME] [--plot PATH]
     sotpy demo talos-torque [--duration S] [--settle S] [--side left|right]

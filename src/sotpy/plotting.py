@@ -214,7 +214,7 @@ def _closed(vertices: np.ndarray) -> np.ndarray:
 
 
 def plot_reach(result: Mapping[str, Any], path: str | Path | None = None) -> Any:
-    """The reaching demo's run (:func:`sotpy.demos.reach.run_reach`'s result), saved as
+    """The reaching demo's run (the result of ``sotpy.demos.reach.run_reach``), saved as
     PNG at ``path`` if given; returns the ``matplotlib.figure.Figure``.
 
     Three axes: distances (m, log scale: the wrist to its target with the reach
@@ -285,7 +285,7 @@ def plot_reach(result: Mapping[str, Any], path: str | Path | None = None) -> Any
 
 
 def plot_robot_tour(result: Mapping[str, Any], path: str | Path | None = None) -> Any:
-    """The robot tour's run (:func:`sotpy.demos.robot_tour.run_robot_tour`'s result),
+    """The robot tour's run (the result of ``sotpy.demos.robot_tour.run_robot_tour``),
     saved as PNG at ``path`` if given; returns the ``matplotlib.figure.Figure``.
 
     Three axes: the followed op point's position (m, world), the CoM (m, world), and
@@ -328,7 +328,7 @@ def plot_robot_tour(result: Mapping[str, Any], path: str | Path | None = None) -
 
 
 def plot_panda_torque(out: Mapping[str, Any], path: str | Path | None = None) -> Any:
-    """The Panda torque demo's run (:func:`sotpy.demos.torque.run_panda_torque`), saved
+    """The Panda torque demo's run (``sotpy.demos.torque.run_panda_torque``), saved
     as PNG at ``path`` if given; returns the ``matplotlib.figure.Figure``.
 
     Three axes: each joint's torque (N m), each torque as a fraction of its limit with
@@ -368,7 +368,7 @@ def plot_panda_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
 
 
 def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) -> Any:
-    """The Talos torque demo's run (:func:`sotpy.demos.torque.run_talos_torque`), saved
+    """The Talos torque demo's run (``sotpy.demos.torque.run_talos_torque``), saved
     as PNG at ``path`` if given; returns the ``matplotlib.figure.Figure``.
 
     Three axes: each sole's normal and tangential contact force (N, sole frame), each

@@ -17,6 +17,11 @@ command line and a script of ``examples/`` call.
 
 The pendulum tutorial (``sotpy demo pendulum``) lives in :mod:`sotpy.tutorial`.
 
+Each demo function is the story itself: the graph built in plain sight, then run; what
+it records, checks and prints is :mod:`sotpy.demos.checks`, its figure
+:mod:`sotpy.plotting`, and ``--viewer`` is :func:`open_viewer` then :func:`replay` (the
+run is computed first, then replayed in the page at real time).
+
 This package only holds the command-line glue, so that building the ``sotpy`` parser
 does not import Pinocchio; the demos are imported when they run (``from
 sotpy.demos.robot_tour import run_robot_tour``).
@@ -167,8 +172,8 @@ def finite_float(text: str) -> float:
 
 
 def robot_options(parser: argparse.ArgumentParser) -> None:
-    """Add ``sotpy demo robot``'s options: ``--robot NAME``, ``--viewer``,
-    ``--duration S`` and ``--dt S``."""
+    """Add ``sotpy demo robot``'s options: ``--robot NAME``, ``--viewer``, ``--hold S``,
+    ``--duration S``, ``--dt S`` and ``--plot PATH``."""
     d = ROBOT_DEMO_DEFAULTS
     parser.add_argument(
         "--robot",
@@ -247,8 +252,8 @@ def non_negative_float(text: str) -> float:
 
 def reach_options(parser: argparse.ArgumentParser, robot: str) -> None:
     """Add the options of ``sotpy demo <robot>`` (the reaching demo): ``--duration S``,
-    ``--dt S``, ``--plot PATH``, ``--viewer``, ``--target-offset X Y Z``, ``--margin M``,
-    ``--damping L``;
+    ``--dt S``, ``--plot PATH``, ``--viewer``, ``--hold S``, ``--target-offset X Y Z``,
+    ``--margin M``, ``--damping L``;
     ``robot`` is stored as the parsed ``robot``."""
     d = REACH_DEMO_DEFAULTS
     parser.set_defaults(robot=robot)

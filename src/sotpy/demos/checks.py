@@ -39,8 +39,8 @@ ROUNDING = 1e-9
 
 def freePrefix(kind: str, robot: str | Path, suffixes: Sequence[str]) -> str:
     """``<kind>_<robot>``, or ``<kind>_<robot>_<k>`` (k = 2, 3, ...) when an entity
-    named ``prefix + suffix`` exists for one of ``suffixes``; ``robot`` may be a path
-    (its stem is used)."""
+    named by one of ``suffixes`` (format strings of ``prefix``, e.g.
+    ``"{prefix}_dynamic"``) exists; ``robot`` may be a path (its stem is used)."""
     text = str(robot)
     base = Path(text).stem if (text.endswith(".toml") or "/" in text or "\\" in text) else text
     base = re.sub(r"[^A-Za-z0-9_-]", "_", base) or "robot"
