@@ -86,8 +86,8 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 def check_figure(fig, title: str) -> dict[str, dict]:
     """The checks every demo figure passes: a title containing ``title``; on every axis
-    a title, an x label, a y label with a unit in brackets that is not both metres and
-    radians, a grid-free check aside, and a legend naming every labelled line. Returns
+    a title, a y label with a unit in brackets that is not both metres and radians, and
+    a legend naming every labelled line; an x label on the figure. Returns
     ``{axis title: {"ylabel": ..., "legend": [texts], "lines": {label: line}}}``."""
     assert fig._suptitle is not None and title in fig._suptitle.get_text()
     out = {}
