@@ -204,7 +204,7 @@ def test_overflow_stop_warns_once_and_counts_dropped_rows():
     d = tr.data()
     np.testing.assert_array_equal(d["time"], [0, 1, 2])
     np.testing.assert_array_equal(d["clock.vec"], [vec_ref(t) for t in range(3)])
-    tr.clear()
+    tr.empty()
     assert not tr.full and tr.dropped == 0
     tr.trigger(6)
     np.testing.assert_array_equal(tr.data()["time"], [6])
@@ -273,12 +273,14 @@ def test_traced_columns_are_fixed_while_rows_are_recorded():
         tr.add(c.vec)
     tr.start()
     tr.trigger(0)
-    with pytest.raises(SotpyError, match="clear"):
+    with pytest.raises(SotpyError, match="empty"):
         tr.add("clock.mat")
-    tr.clear()
+    tr.empty()
     tr.add("clock.mat")
     tr.trigger(1)
     assert tr.data()["clock.mat"].shape == (1, 4)
+    tr.clear()  # SoT's clear: the traced signals go too
+    assert tr.columns() == [] and tr.trigger.dependencies == []
 
 
 def test_dump_refuses_unknown_formats(tmp_path):

@@ -2,7 +2,7 @@
 
 ::
 
-    sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S]
+    sotpy demo pendulum [--plot PATH] [--duration S] [--theta0 RAD] [--dt S] [--gain K K K K]
     sotpy demo robot [--robot NAME] [--duration S] [--viewer [--hold S]] [--dt S]
                      [--plot PATH]
     sotpy demo talos|romeo|nao [--duration S] [--dt S] [--plot PATH] [--viewer [--hold S]]
@@ -58,6 +58,14 @@ def _pendulum_options(parser: argparse.ArgumentParser) -> None:
         "--theta0", type=finite_float, default=0.1, metavar="RAD", help="initial angle, rad"
     )
     g.add_argument("--dt", type=positive_float, default=1e-3, metavar="S", help="time step, s")
+    g.add_argument(
+        "--gain",
+        type=finite_float,
+        nargs=4,
+        metavar="K",
+        help="the controller's gain for (x, theta, x_dot, theta_dot), e.g. the SoT "
+        "tutorial's 0 27 0.001 0.001 (default: the LQR gain)",
+    )
 
 
 def _pendulum_run(args: argparse.Namespace) -> int:
@@ -66,14 +74,19 @@ def _pendulum_run(args: argparse.Namespace) -> int:
 
     try:
         result = run_pendulum(
-            duration=args.duration, dt=args.dt, theta0=args.theta0, plot=args.plot
+            duration=args.duration,
+            dt=args.dt,
+            theta0=args.theta0,
+            plot=args.plot,
+            gain=args.gain,
         )
     except SotpyError as exc:
         print(f"sotpy demo pendulum: {exc}", file=sys.stderr)
         return 1
     verdict = "converged" if result["converged"] else "did NOT converge"
+    why = "; it fell" if result["fell"] else ""
     print(
-        f"pendulum {verdict} (|theta| < 1e-3 rad and |theta_dot| < 1e-2 rad/s); "
+        f"pendulum {verdict} (|theta| < 1e-3 rad and |theta_dot| < 1e-2 rad/s){why}; "
         f"{len(result['time']) - 1} ticks in {result['wall_time']:.2f} s"
     )
     return 0 if result["converged"] else 1
@@ -86,7 +99,7 @@ DEMOS: dict[
     tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]],
 ] = {
     "pendulum": (
-        "SoT's tutorial: an inverted pendulum balanced by LQR state feedback",
+        "SoT's tutorial: an inverted pendulum balanced by state feedback (LQR, or --gain)",
         _pendulum_options,
         _pendulum_run,
     ),

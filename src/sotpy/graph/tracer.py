@@ -1,4 +1,5 @@
-"""The ``Tracer`` entity: records signals into preallocated memory, writes npz/CSV.
+"""The ``Tracer`` entity: records signals into preallocated memory, writes npz/CSV or
+SoT's text files.
 
 Usage, as with SoT's ``TracerRealTime``::
 
@@ -12,6 +13,16 @@ Usage, as with SoT's ``TracerRealTime``::
 
 Reading ``trigger`` at tick ``t`` reads every traced signal at ``t`` (computing it if
 outdated) and appends one row. ``trigger.setPeriod(k)`` records every ``k`` ticks.
+``triger`` (SoT's spelling) is the same trigger: reading either records the row once.
+
+SoT's files. ``open(dir, prefix, suffix)`` names one text file per traced signal,
+``dir/prefix + name + suffix`` (``name`` the label given to ``add``, else the signal's
+short name), created empty at once; ``dump()`` then appends the rows recorded since the
+last ``dump()`` to them and forgets those rows (``TracerRealTime``'s dump), one line per
+row: the tick, a tab, the values separated by tabs (a matrix or a placement row after
+row), written with 17 significant digits. ``close()`` dumps what is left and closes the
+files. ``empty()`` forgets the rows, ``clear()`` also forgets the traced signals and
+closes the files (SoT's ``clear``).
 
 When the buffer is full the tracer never drops data silently: with the default
 ``overflow="stop"`` it stops recording, warns once (:class:`~sotpy.errors.SotpyWarning`),
@@ -43,12 +54,14 @@ class Tracer(Entity):
 
     def __init__(self, name: str, bufferSize: int = 100_000, overflow: str = "stop") -> None:
         self._columns: list[tuple[str, Signal]] = []
+        self._fileNames: list[str] = []  # per column: the name of its SoT file
+        self._files: list[Path] | None = None  # the files open() named, if open
         self._size = 0
         self.setBufferSize(bufferSize)
         self.setOverflow(overflow)
         self._recording = False
         self._timeStep: float | None = None
-        self.clear()
+        self.empty()
 
     @Output(INT, withTime=True, timeDependent=True, doc="number of rows recorded")
     def trigger(self, t: int, *values: Any) -> int:
@@ -56,6 +69,11 @@ class Tracer(Entity):
         if self._recording:
             self._record(t, values)
         return self._count
+
+    @Output(INT, deps=("trigger",), doc="SoT's spelling of trigger: reading it records")
+    def triger(self, count: int) -> int:
+        """The same row count as ``trigger``, which it reads (SoT's name)."""
+        return count
 
     # -- configuration ----------------------------------------------------------------
     @command
@@ -73,11 +91,18 @@ class Tracer(Entity):
             raise SotpyError(f"{self.className}({self.name}).add: {label!r} is already traced")
         if self._count:
             raise SotpyError(
-                f"{self.className}({self.name}).add: clear() the {self._count} recorded rows "
-                "before changing the traced signals"
+                f"{self.className}({self.name}).add: empty() the {self._count} recorded rows "
+                "(or dump() them) before changing the traced signals"
             )
+        fileName = name or sig.shortName
+        if self._files is not None:
+            path = self._filePath(fileName)
+            self._create(path)
         self.trigger.setDependencies([*self.trigger.dependencies, sig])
         self._columns.append((label, sig))
+        self._fileNames.append(fileName)
+        if self._files is not None:
+            self._files.append(path)
         self._buffers = None
 
     def columns(self) -> list[str]:
@@ -91,10 +116,13 @@ class Tracer(Entity):
             if label == name:
                 if self._count:
                     raise SotpyError(
-                        f"{self.className}({self.name}).remove: clear() the recorded rows "
-                        "before changing the traced signals"
+                        f"{self.className}({self.name}).remove: empty() the recorded rows "
+                        "(or dump() them) before changing the traced signals"
                     )
                 del self._columns[i]
+                del self._fileNames[i]
+                if self._files is not None:
+                    del self._files[i]
                 self.trigger.setDependencies([s for _, s in self._columns])
                 self._buffers = None
                 return
@@ -107,7 +135,7 @@ class Tracer(Entity):
             raise SotpyError(f"{self.className}({self.name}): buffer size must be >= 1, got {rows}")
         if getattr(self, "_count", 0):
             raise SotpyError(
-                f"{self.className}({self.name}).setBufferSize: clear() the recorded rows first"
+                f"{self.className}({self.name}).setBufferSize: empty() the recorded rows first"
             )
         self._size = rows
         self._buffers = None
@@ -142,14 +170,73 @@ class Tracer(Entity):
         self._recording = False
 
     @command
-    def clear(self) -> None:
-        """Forget the recorded rows and the overflow state."""
+    def empty(self) -> None:
+        """Forget the recorded rows and the overflow state (the traced signals stay)."""
         self._count = 0
         self._head = 0
         self.dropped = 0
         self.full = False
-        self._buffers: list[Any] | None = None
-        self._ticks: Any = None
+        if not hasattr(self, "_buffers"):  # the buffers are kept for the next rows
+            self._buffers: list[Any] | None = None
+            self._ticks: Any = None
+
+    @command
+    def clear(self) -> None:
+        """Forget the traced signals and their rows, and close the files (SoT's
+        ``clear``; rows not dumped are lost: ``close()`` first to keep them)."""
+        self._files = None
+        self._columns = []
+        self._fileNames = []
+        self._buffers = None
+        self.trigger.setDependencies([])
+        self.empty()
+
+    # -- SoT's files ------------------------------------------------------------------
+    @command
+    def open(self, dirname: str, prefix: str, suffix: str) -> None:
+        """Write SoT's text files: one per traced signal, ``dirname/prefix + name +
+        suffix``, created empty now (and for a signal added later, when it is added);
+        ``dump()`` appends the recorded rows to them. The directory is created if needed.
+        Reopening first ``close()`` s the files open."""
+        if self._files is not None:
+            self.close()
+        d = Path(dirname).expanduser()
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SotpyError(
+                f"{self.className}({self.name}).open: cannot create the directory {str(d)!r}: {exc}"
+            ) from None
+        self._dir, self._prefix, self._suffix = d, prefix, suffix
+        paths = [self._filePath(n) for n in self._fileNames]
+        for p in paths:
+            self._create(p)
+        self._files = paths
+
+    def files(self) -> list[str]:
+        """The paths of the open files, one per traced signal in column order (empty
+        when no file is open)."""
+        return [str(p) for p in self._files or []]
+
+    def _filePath(self, fileName: str) -> Path:
+        return self._dir / f"{self._prefix}{fileName}{self._suffix}"
+
+    def _create(self, path: Path) -> None:
+        try:
+            path.write_text("")
+        except OSError as exc:
+            raise SotpyError(
+                f"{self.className}({self.name}): cannot create the trace file {str(path)!r}: {exc}"
+            ) from None
+
+    @command
+    def close(self) -> None:
+        """Dump the rows not yet written to the open files, then close them (nothing
+        happens when no file is open)."""
+        if self._files is None:
+            return
+        self._dumpFiles()
+        self._files = None
 
     # -- recording --------------------------------------------------------------------
     def _allocate(self, values: tuple[Any, ...]) -> None:
@@ -181,7 +268,7 @@ class Tracer(Entity):
             if self._overflow == "raise":
                 raise TracerOverflow(
                     f"{self.className}({self.name}): buffer of {self._size} rows is full at "
-                    f"tick {t}; dump() and clear(), or setBufferSize()"
+                    f"tick {t}; dump() and empty(), or setBufferSize()"
                 )
             if not self.full:
                 self.full = True
@@ -240,11 +327,21 @@ class Tracer(Entity):
         return out
 
     @command
-    def dump(self, path: str) -> str:
+    def dump(self, path: str | None = None) -> str:
         """Write the rows to ``path``: ``.npz`` (one array per column) or ``.csv`` (a
-        header, ``time`` first, one column per component: ``label[i]``)."""
+        header, ``time`` first, one column per component: ``label[i]``); the rows are
+        kept. Without ``path`` (SoT's ``dump()``): append the rows to the files
+        ``open`` named and forget them; returns the directory."""
         import numpy as np
 
+        if path is None:
+            if self._files is None:
+                raise SotpyError(
+                    f"{self.className}({self.name}).dump: no file is open: call "
+                    "open(dirname, prefix, suffix) first, or dump(path) to a .npz or .csv file"
+                )
+            self._dumpFiles()
+            return str(self._dir)
         p = Path(path)
         data = self.data()
         if p.suffix == ".npz":
@@ -265,11 +362,45 @@ class Tracer(Entity):
             )
         return str(p)
 
+    def _dumpFiles(self) -> None:
+        """Append the recorded rows to the open files (tick, tab, values), then forget
+        them."""
+        import numpy as np
+
+        ticks = self._orderedTicks()
+        if ticks is not None and len(ticks):
+            data = self.data()
+            for (label, _), path in zip(self._columns, self._files, strict=True):  # type: ignore[arg-type]
+                table = np.column_stack((ticks, data[label]))
+                fmt = ["%d"] + ["%.17g"] * data[label].shape[1]
+                try:
+                    with path.open("a") as f:
+                        np.savetxt(f, table, fmt=fmt, delimiter="\t")
+                except OSError as exc:
+                    raise SotpyError(
+                        f"{self.className}({self.name}).dump: cannot write {str(path)!r}: {exc}; "
+                        "the rows are kept"
+                    ) from None
+        self.empty()
+
+    def _orderedTicks(self) -> Any:
+        """The recorded ticks, oldest first (None before the first record)."""
+        import numpy as np
+
+        if self._buffers is None or self._count == 0:
+            return None
+        if self.full and self._overflow == "ring":
+            order = np.r_[self._head : self._size, 0 : self._head]
+        else:
+            order = np.arange(self._count)
+        return self._ticks[order]
+
     def status(self) -> str:
         """One line: rows recorded, capacity, FULL and dropped rows."""
         state = "recording" if self._recording else "stopped"
         full = f", FULL, {self.dropped} rows dropped" if self.full else ""
-        return f"{self.name}: {state}, {self._count}/{self._size} rows{full}"
+        files = f", files {self._dir}/{self._prefix}*{self._suffix}" if self._files else ""
+        return f"{self.name}: {state}, {self._count}/{self._size} rows{full}{files}"
 
     def signalsDisplay(self) -> str:
         return super().signalsDisplay() + "\n" + self.status()
