@@ -9,6 +9,7 @@ instead of the robot.
 
 from __future__ import annotations
 
+import warnings
 import zlib
 
 import numpy as np
@@ -185,6 +186,92 @@ def test_feature_pose_error_and_jacobian(talos, cls, op):
         assert np.abs(expected).max() > 1e-2  # a non-trivial error
         assert_jacobian(f.jacobian.value, error, model, q, rng)
         np.testing.assert_array_equal(f.errordot.value, np.zeros(6))  # fixed reference
+
+
+@pytest.mark.parametrize("op", list(OP_POINTS))
+def test_feature_pose_current_frame_error_jacobian_errordot(talos, op):
+    """SoT's frame('current'): the error of M* seen from M, its exact Jacobian and its
+    errordot, against the formula and finite differences."""
+    model, dyn = talos
+    rng = np.random.default_rng(zlib.crc32(op.encode()) + 1)
+    f = FeaturePose("f")
+    assert f.getFrame() == "desired"
+    f.frame("current")
+    assert f.getFrame() == "current"
+    plug(dyn.signal(op), f.position)
+    plug(dyn.signal("J" + op), f.Jq)
+
+    def error(q):
+        dyn.position.value = q
+        return f.error.value.copy()
+
+    for _ in range(3):
+        q = random_q(model, rng)
+        dyn.position.value = q
+        M = independent_placement(model, q, OP_POINTS[op])
+        axis = rng.standard_normal(3)
+        twist = np.concatenate(
+            [rng.uniform(-0.5, 0.5, 3), axis / np.linalg.norm(axis) * rng.uniform(0.0, 2.0)]
+        )
+        Mdes = M * pin.exp6(twist)
+        f.reference.value = Mdes
+        expected = np.concatenate(
+            [
+                M.rotation.T @ (Mdes.translation - M.translation),
+                pin.log3(M.rotation.T @ Mdes.rotation),
+            ]
+        )
+        np.testing.assert_allclose(f.error.value, expected, atol=1e-10)
+        assert_jacobian(f.jacobian.value, error, model, q, rng)
+        # errordot: the rate of the error when the reference moves, q fixed
+        nu = rng.standard_normal(6)
+        f.referenceVelocity.value = nu
+        ed = f.errordot.value
+        f.reference.value = Mdes * pin.exp6(EPS * nu)
+        ep = f.error.value.copy()
+        f.reference.value = Mdes * pin.exp6(-EPS * nu)
+        em = f.error.value.copy()
+        np.testing.assert_allclose(ed, (ep - em) / (2 * EPS), atol=1e-6)
+        f.referenceVelocity.value = np.zeros(6)
+        f.reference.value = Mdes
+    # the selection keeps the rows of the current-frame error
+    f.selec.value = "111000"
+    np.testing.assert_allclose(f.error.value, expected[:3], atol=1e-10)
+    with pytest.raises(CommandError, match=r"FeaturePose\(f\)\.frame: expected 'current'"):
+        f.frame("world")
+    assert f.getFrame() == "current"
+    with pytest.raises(CommandError, match="FeaturePose's frame"):
+        FeaturePoseSE3("g").frame("current")
+
+
+def test_placement_inputs_take_homogeneous_matrices_and_tuples(talos):
+    """SoT writes placements as 4 x 4 homogeneous matrices (arrays or tuples of rows);
+    they are checked and stored as pinocchio.SE3."""
+    f = FeaturePose("f")
+    M = pin.SE3(pin.exp3(np.array([0.1, -0.2, 0.3])), np.array([0.5, -0.2, 1.0]))
+    f.reference.value = M.homogeneous
+    assert isinstance(f.reference.value, pin.SE3) and f.reference.value.isApprox(M, 1e-12)
+    f.reference.value = tuple(tuple(r) for r in M.homogeneous.tolist())
+    assert f.reference.value.isApprox(M, 1e-12)
+    with warnings.catch_warnings():  # numpy.matrix, as old SoT scripts use it
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        f.reference.value = np.asmatrix(M.homogeneous)
+    assert f.reference.value.isApprox(M, 1e-12)
+    rounded = np.round(M.homogeneous, 6)  # a few digits: projected on SO(3)
+    f.reference.value = rounded
+    R = f.reference.value.rotation
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-14)
+    for bad, why in (
+        (np.diag([2.0, 2.0, 2.0, 1.0]), "not a rotation"),
+        (np.eye(3), "4 x 4"),
+        (np.diag([1.0, 1.0, 1.0, 2.0]), "last row"),
+        ("eye", "homogeneous matrix"),
+    ):
+        with pytest.raises(
+            SignalTypeError, match=rf"FeaturePose\(f\)::input\(SE3\)::reference.*{why}"
+        ):
+            f.reference.value = bad
+    assert f.reference.value.isApprox(pin.SE3(R, rounded[:3, 3]), 1e-12)  # left unchanged
 
 
 @pytest.mark.parametrize("cls", [FeaturePose, FeaturePoseSE3])

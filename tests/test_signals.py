@@ -30,6 +30,7 @@ from sotpy.graph import (
     Output,
     OutputSignal,
     checkPlugged,
+    compilePlan,
     plug,
     pool,
 )
@@ -695,20 +696,41 @@ def test_plug_into_an_output_is_refused_and_changes_nothing():
     assert b.out.value == 7.0
 
 
-def test_plug_from_an_input_is_refused_and_changes_nothing():
+def test_plug_from_an_input_follows_it():
+    """dynamic-graph's plug(input, input): the second input follows the first, whatever
+    it holds now and later."""
     a = _adder("a", 1, 2)
     b = SigAdd("b")
-    src = _adder("src", 5, 5)
-    plug(src.out, b.a)
-    b.b.value = 1
+    b.b.value = 10
+    plug(a.a, b.a)  # b.a follows a.a (a constant, 1)
     assert b.out.value == 11.0
-    before = _snapshot(a, b, src)
-    with pytest.raises(PlugError, match=r"SigAdd\(a\)::input\(double\)::a"):
-        plug(a.a, b.a)
-    assert _snapshot(a, b, src) == before
-    assert b.a.source is src.out
-    assert b.out.value == 11.0
-    assert b.calls == 1
+    assert b.a.source is a.a
+    assert "-->-- PLUGGED <- SigAdd(a)::input(double)::a" in b.a.display()
+    a.a.value = 5  # a new constant of the source, seen at once
+    assert b.out.value == 15.0
+    src = _adder("src", 20, 0)
+    plug(src.out, a.a)  # the source gets plugged to an output: the follower follows it
+    assert b.out.value == 30.0 and a.out.value == 22.0
+    src.a.value = 40
+    pool.advance(1)
+    assert b.out.value == 50.0
+    # a compiled plan reads through both plugs
+    plan = compilePlan([b.out])
+    src.a.value = 41
+    plan.run(2)
+    assert b.out(2) == 51.0
+    # the source unplugged and unset: reading the follower names the source
+    a.a.unplug()
+    with pytest.raises(UnpluggedError, match=r"SigAdd\(a\)::input\(double\)::a") as info:
+        b.out.recompute(3)
+    assert info.value.signals == ["SigAdd(a)::input(double)::a"]
+    assert checkPlugged(b.out) == ["SigAdd(a)::input(double)::a"]
+    # a cycle of inputs is refused, and leaves the plugs as they were
+    with pytest.raises(CycleError):
+        plug(b.a, a.a)
+    assert a.a.source is None and b.a.source is a.a
+    with pytest.raises(PlugError, match="must be a signal"):
+        plug(3.0, b.a)
 
 
 def test_plug_type_mismatch_is_refused_and_keeps_the_previous_plug():

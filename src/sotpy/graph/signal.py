@@ -8,7 +8,9 @@ Semantics (dynamic-graph's, with its known defects fixed; see ``docs/graph.md``)
   output declared without a callback is a *state* signal that its entity writes (for
   example ``Device.state``).
 * An **input** signal is plugged to an output, set to a constant (SoT's
-  ``AUTOPLUGGED``), or unset. Setting a constant unplugs it.
+  ``AUTOPLUGGED``), or unset. Setting a constant unplugs it. An input may also be
+  plugged to another input (dynamic-graph allows it): it then follows whatever that
+  input holds or is plugged to, now and after it changes.
 * Every signal carries the tick ``time`` at which its value was last computed or
   written. An output is *outdated* at tick ``t`` when ``t >= time + period`` and either
   it is time-dependent, or a dependency is outdated, or a dependency was computed
@@ -432,7 +434,7 @@ class InputSignal(Signal):
         self, entity: Entity, shortName: str, type: SignalType, default: Any = None, doc: str = ""
     ) -> None:
         super().__init__(entity, shortName, type, doc)
-        self._source: OutputSignal | None = None
+        self._source: Signal | None = None  # an output, or an input it follows
         self._default = default
         if default is not None:
             self._value = self._convert(default)
@@ -440,8 +442,9 @@ class InputSignal(Signal):
             self._time = self._checked = pool.time
 
     @property
-    def source(self) -> OutputSignal | None:
-        """The output this input is plugged to, if any."""
+    def source(self) -> Signal | None:
+        """The signal this input is plugged to (an output, or an input it follows), if
+        any."""
         return self._source
 
     @property
@@ -454,7 +457,8 @@ class InputSignal(Signal):
         return [self._source] if self._source is not None else []
 
     def _holder(self) -> Signal:
-        return self._source if self._source is not None else self
+        src = self._source
+        return self if src is None else src._holder()
 
     def setConstant(self, v: Any) -> None:
         """Unplug, and hold the constant ``v`` (SoT's AUTOPLUGGED)."""
@@ -502,10 +506,13 @@ class InputSignal(Signal):
         _invalidate_dependants(self)
 
     def _retarget(self) -> None:
-        """Re-resolve the outputs reading this input after a plug change."""
+        """Re-resolve the outputs reading this input after a plug change (and those
+        reading the inputs that follow it)."""
         for d in self._dependants:
             if isinstance(d, OutputSignal):
                 d._resolve()
+            elif isinstance(d, InputSignal):
+                d._retarget()
         pool.version += 1
         self.modeChanged()
 
@@ -529,8 +536,12 @@ class InputSignal(Signal):
 def plug(source: Signal, target: Signal) -> None:
     """Plug the output ``source`` into the input ``target`` (SoT's ``plug(out, in)``).
 
+    ``source`` may also be an input: ``target`` then follows it, holding what it holds
+    (its constant, or the output it is plugged to, as it changes); reading ``target``
+    while ``source`` is unset raises naming ``source``.
+
     Refused with an exception, leaving both signals as they were, when ``source`` is not
-    an output, ``target`` is not an input, the types differ (an ``any`` input takes
+    a signal, ``target`` is not an input, the types differ (an ``any`` input takes
     every type), or the plug would close a same-tick cycle.
     """
     if not isinstance(target, InputSignal):
@@ -539,11 +550,10 @@ def plug(source: Signal, target: Signal) -> None:
             f"cannot plug into {getattr(target, 'name', target)!r}: it is {kind}; "
             "the second argument of plug must be an input signal"
         )
-    if not isinstance(source, OutputSignal):
-        kind = "an input" if isinstance(source, InputSignal) else type(source).__name__
+    if not isinstance(source, (OutputSignal, InputSignal)):
         raise PlugError(
             f"cannot plug {getattr(source, 'name', source)!r} into {target.name}: the source is "
-            f"{kind}; the first argument of plug must be an output signal"
+            f"{type(source).__name__}; the first argument of plug must be a signal"
         )
     if not target.type.accepts_output(source.type):
         raise SignalTypeError(

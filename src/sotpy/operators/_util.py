@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..dynamics.types import ROTATION_TOLERANCE, homogeneousToSE3
 from ..errors import CommandError, SignalTypeError
 from ..graph.signal import InputSignal, Signal
 
@@ -28,11 +29,6 @@ __all__ = [
     "received",
     "who",
 ]
-
-#: Largest ``max |R^T R - I|`` and ``|det R - 1|`` accepted for a rotation matrix
-#: written by a user or a file (6 significant digits give errors near 1e-6).
-ROTATION_TOLERANCE = 1e-5
-
 
 def who(entity: Any, command: str) -> str:
     """``Class(name).command``, the prefix of a command's error message."""
@@ -92,36 +88,14 @@ def check_rotation(sig: Signal, R: np.ndarray, tolerance: float = ROTATION_TOLER
 
 
 def homogeneous_to_se3(M: np.ndarray, where: str, tolerance: float = ROTATION_TOLERANCE) -> pin.SE3:
-    """The ``pinocchio.SE3`` of a 4 x 4 homogeneous matrix, checked.
-
-    The last row must be ``(0, 0, 0, 1)`` and the top-left block a rotation, within
-    ``tolerance``; the rotation is then projected on SO(3) (nearest rotation, by SVD)
-    so that a matrix written with a few digits gives an exact rotation. ``where``
-    starts the error message (a signal name, or ``file, line n``).
+    """The ``pinocchio.SE3`` of a 4 x 4 homogeneous matrix, checked (see
+    :func:`sotpy.dynamics.types.homogeneousToSE3`); ``where`` starts the error message
+    (a signal name, or ``file, line n``).
 
     Raises:
         ValueError: the matrix is not homogeneous (callers wrap it in their error).
     """
-    M = np.asarray(M, dtype=float)
-    if M.shape != (4, 4):
-        raise ValueError(f"{where}: expected a 4 x 4 homogeneous matrix, got shape {M.shape}")
-    if not np.isfinite(M).all():
-        raise ValueError(f"{where}: the homogeneous matrix has non-finite entries")
-    if np.abs(M[3] - (0.0, 0.0, 0.0, 1.0)).max() > tolerance:
-        raise ValueError(
-            f"{where}: the last row of a homogeneous matrix must be (0, 0, 0, 1), "
-            f"got {M[3].tolist()}"
-        )
-    R = M[:3, :3]
-    err = float(np.abs(R.T @ R - np.eye(3)).max())
-    det = float(np.linalg.det(R))
-    if not (err <= tolerance and abs(det - 1.0) <= tolerance):
-        raise ValueError(
-            f"{where}: the top-left 3 x 3 block is not a rotation (max|R^T R - I| = "
-            f"{err:.3g}, det R = {det:.6g}; tolerance {tolerance:g})"
-        )
-    U, _, Vt = np.linalg.svd(R)
-    return pin.SE3(U @ Vt, M[:3, 3].copy())
+    return homogeneousToSE3(M, where, tolerance)
 
 
 def check_index_range(entity: Any, command: str, imin: int, imax: int) -> None:

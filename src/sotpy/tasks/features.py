@@ -557,6 +557,21 @@ class FeaturePose(FeatureAbstract):
     desired origin, expressed in the desired frame's axes), rows 3-5 a pure
     orientation task. ``keep()`` sets the reference to the current placement.
     (sot-core's ``FeaturePose`` expresses the translation rows in the world axes.)
+
+    ``frame("desired")`` (the default) is the error above, the one of SoT's
+    ``FeaturePoint6d`` in its ``"desired"`` frame. ``frame("current")`` is SoT's other
+    choice: the error of the desired frame seen from the current one, with
+    ``Mc = M^-1 M* = (Rc, X)``:
+
+    - ``error = (X, log3(Rc))``: ``X = R^T (p* - p)``, the desired origin in the
+      current frame, then the rotation vector of ``R^T R*``;
+    - ``jacobian = (-Jv + [X]x Jw, -Jlog3(Rc) Rc^T Jw)`` with ``Jq = (Jv, Jw)`` (exact;
+      SoT's wrote ``-Rc^T Jw`` for the rotation rows, its value at zero error);
+    - ``errordot = (Rc v*, Jlog3(Rc) w*)``.
+
+    Both go to zero at the same placement; they differ in the axes of the error, so
+    in the path (and in which rows a selection like ``"111000"`` keeps). ``getFrame()``
+    says which one is used.
     """
 
     className = "FeaturePose"
@@ -590,7 +605,37 @@ class FeaturePose(FeatureAbstract):
         self._D = np.zeros((6, 6))  # buffer of _poseJacobian (off-diagonal blocks: 0)
         self._rel: tuple[Any, ...] = (None, None, None, None)
         self._splitCache: tuple[Any, ...] = (_MISSING, None, None)
+        self._current = False  # frame("current"): SoT's error of M* seen from M
         super().__init__(name)
+
+    @command
+    def frame(self, frame: str) -> None:
+        """Set computation frame: 'desired' (default) or 'current'
+
+        'desired': error = (t, log3) of M*^-1 M, the frame seen from the desired one;
+        'current': error = (t, log3) of M^-1 M*, the desired frame seen from the current
+        one (SoT's FeaturePoint6d choices; see the class doc).
+        """
+        if frame not in ("current", "desired"):
+            raise CommandError(
+                f"{self.className}({self.name}).frame: expected 'current' or 'desired', got "
+                f"{frame!r}; the frame is left {self.getFrame()!r}"
+            )
+        if frame == "current" and not self._usesRotation:
+            raise CommandError(
+                f"{self.className}({self.name}).frame: a {self.className} has one error, "
+                "log6(M*^-1 M) ('desired'); SoT's 'current' frame is FeaturePose's "
+                "frame('current')"
+            )
+        current = frame == "current"
+        if current != self._current:
+            self._current = current
+            self._wire()  # the outputs are recomputed, compiled plans recompiled
+
+    @command
+    def getFrame(self) -> str:
+        """Get frame of computation of the error: 'desired' or 'current'."""
+        return "current" if self._current else "desired"
 
     def _relative(self, M: pin.SE3, Mdes: pin.SE3) -> tuple[pin.SE3, np.ndarray | None]:
         """(Mr = M*^-1 M, its rotation), computed once for the error and the Jacobian of
@@ -652,6 +697,10 @@ class FeaturePose(FeatureAbstract):
         return out
 
     def _error(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3) -> np.ndarray:
+        if self._current:
+            Mc = M.actInv(Mdes)
+            e = np.concatenate((Mc.translation, pin.log3(Mc.rotation)))
+            return _take(e, self._rows(selec, 6))
         rel, R = self._relative(M, Mdes)
         return self._poseError(rel, R, self._rows(selec, 6))
 
@@ -659,12 +708,20 @@ class FeaturePose(FeatureAbstract):
         rows = self._rows(selec, 6)
         if Jq.shape[0] != 6:
             raise self._sizeError(self.Jq, Jq, "a 6 x nv Jacobian (LOCAL, linear rows first)")
+        if self._current:
+            Mc = M.actInv(Mdes)
+            Rc = Mc.rotation
+            L = np.zeros((6, 6))
+            L[:3, :3] = -np.eye(3)
+            L[:3, 3:] = _skew(Mc.translation)
+            L[3:, 3:] = -pin.Jlog3(Rc) @ Rc.T
+            return _take(L, rows) @ Jq
         rel, R = self._relative(M, Mdes)
         return self._poseJacobian(rel, R, rows, Jq)
 
     def _rowWriter(self) -> RowWriter | None:
-        if not self._ownCallbacks(FeaturePose):
-            return super()._rowWriter()  # FeaturePoseSE3: its callbacks
+        if self._current or not self._ownCallbacks(FeaturePose):
+            return super()._rowWriter()  # frame("current"), FeaturePoseSE3: the callbacks
         kernel = _rowkernels.pose_rows
         se3, ndarray = pin.SE3, np.ndarray
         ref: list[Any] = [None, None, None]  # the reference and its arrays, by identity
@@ -696,6 +753,10 @@ class FeaturePose(FeatureAbstract):
             raise self._sizeError(self.referenceVelocity, nu, "a vector of size 6")
         if not nu.any():
             return np.zeros(6 if rows is None else len(rows))
+        if self._current:
+            Rc = M.actInv(Mdes).rotation
+            out = np.concatenate((Rc @ nu[:3], pin.Jlog3(Rc) @ nu[3:]))
+            return _take(out, rows)
         return _take(self._poseErrordot(*self._relative(M, Mdes), nu), rows)
 
     @command
