@@ -329,6 +329,7 @@ def test_ready_tasks_are_created_once_on_access():
         "feature_rt_left-ankle",
         "task_rt_left-ankle",
         "gain_rt_left-ankle",
+        "opmodif_rt_left-ankle",
     }
     assert isinstance(tasks["com"], MetaTaskKineCom)
     assert isinstance(tasks["posture"], MetaTaskKinePosture)

@@ -392,7 +392,7 @@ def test_meta_task_kine6d_names_and_op_points(talos):
     lh.keep()
     np.testing.assert_allclose(lh.task.error.value, np.zeros(6), atol=1e-12)
     before = pool.list()
-    with pytest.raises(EntityError, match="featurelh, tasklh, gainlh already exist"):
+    with pytest.raises(EntityError, match="featurelh, tasklh, gainlh, opmodiflh already exist"):
         MetaTaskKine6d("lh", dyn, "left-wrist")
     assert pool.list() == before
     Task("taskx")  # a clash on one name only: nothing is created

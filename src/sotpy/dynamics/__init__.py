@@ -13,7 +13,7 @@ Conventions (written once, tested against finite differences):
 ``load_robot`` builds both for a robot shipped in ``sotpy/robots`` (``list_robots()``).
 """
 
-from .device import Device
+from .device import Device, RobotSimu
 from .dynamic import Dynamic
 from .robot import Robot, list_robots, load_model, load_robot, robot_info
 from .types import SE3
@@ -23,6 +23,7 @@ __all__ = [
     "Device",
     "Dynamic",
     "Robot",
+    "RobotSimu",
     "list_robots",
     "load_model",
     "load_robot",

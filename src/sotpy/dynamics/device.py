@@ -140,6 +140,7 @@ __all__ = [
     "DEFAULT_CONTACT_KP",
     "ROUNDING_TOLERANCE",
     "Device",
+    "RobotSimu",
 ]
 
 #: Control types and what the control is.
@@ -226,10 +227,22 @@ class Device(Entity):
         doc="control: v (m/s, rad/s), dv/dt (m/s^2, rad/s^2) or actuated torques (N m), "
         "see setControlType",
     )
+    zmp = Input(
+        VECTOR,
+        default=np.zeros(3),
+        doc="ZMP reference (3, m, world) for a real robot's stabiliser; not simulated",
+    )
     state = Output(VECTOR, doc="configuration q (size nq): m, rad, free-flyer quaternion")
     velocity = Output(VECTOR, doc="velocity v (size nv): m/s, rad/s, base frame for the base")
 
-    def __init__(self, name: str, model: pin.Model) -> None:
+    def __init__(self, name: str, model: pin.Model | None = None) -> None:
+        if model is None:
+            raise EntityError(
+                f"{self.className}({name}): a simulated device needs the robot's "
+                f"pinocchio.Model: {self.className}(name, model) (SoT's {self.className}"
+                "(name) then resize(n) has no model to integrate a free flyer with; "
+                "load_robot(name) builds a robot's Dynamic and Device)"
+            )
         if not isinstance(model, pin.Model):
             raise EntityError(
                 f"Device({name}): expected a pinocchio.Model, got {type(model).__name__}"
@@ -394,10 +407,34 @@ class Device(Entity):
 
     @command
     def getTimeStep(self) -> float:
-        """The time step of the last ``increment``, in s."""
+        """The time step of the last ``increment`` (or the one ``setTimeStep`` set), in s."""
         if self._timeStep is None:
-            raise SotpyError(f"{self._who('getTimeStep')}: increment has not been called yet")
+            raise SotpyError(
+                f"{self._who('getTimeStep')}: increment has not been called yet (and "
+                "setTimeStep was not)"
+            )
         return self._timeStep
+
+    @command
+    def setTimeStep(self, dt: float) -> None:
+        """Set the time step getTimeStep gives until the next ``increment`` (s, > 0;
+        SoT's ``RobotSimu.setTimeStep``). ``increment(dt)`` still takes its step."""
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise CommandError(
+                f"{self._who('setTimeStep')}: dt must be a finite value > 0 s, got {dt!r}"
+            )
+        self._timeStep = dt
+
+    @command
+    def resize(self, n: int) -> None:
+        """SoT's ``resize``: the size of the state is the model's; accepted (and without
+        effect) when ``n`` is nq or nv, refused otherwise."""
+        if n not in (self._nq, self._nv):
+            raise CommandError(
+                f"{self._who('resize')}: the state of a Device has the size of its model "
+                f"(nq = {self._nq}, nv = {self._nv}), got {n}; build the Device over the "
+                "model you simulate (Device(name, model), or load_robot)"
+            )
 
     # -- contacts ----------------------------------------------------------------------
     @command
@@ -784,3 +821,10 @@ class Device(Entity):
     @staticmethod
     def _names(idx: np.ndarray, names: list[str]) -> str:
         return ", ".join(names[i] for i in idx)
+
+
+class RobotSimu(Device):
+    """SoT's former name of the simulated device (``RobotSimu`` of sot-core): a
+    :class:`Device` (``RobotSimu(name, model)``), the same commands and signals."""
+
+    className = "RobotSimu"

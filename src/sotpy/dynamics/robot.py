@@ -59,6 +59,7 @@ __all__ = [
     "ROBOTS_DIR",
     "Coupling",
     "Foot",
+    "HumanoidRobotAPI",
     "Robot",
     "RobotDescriptionError",
     "RobotError",
@@ -146,8 +147,196 @@ def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     return np.array(lower[:-1] + upper[:-1])
 
 
+class HumanoidRobotAPI:
+    """The attributes and methods of SoT's humanoid robot class (sot-dynamic-pinocchio's
+    ``AbstractRobot``) over sotpy's robot: shared by :class:`Robot` and the robot
+    classes of the compatibility layer (``sotpy run``).
+
+    Needs ``name``, ``model``, ``dynamic``, ``device``, ``opPoints`` and
+    ``halfSitting``. Provides:
+
+    - ``timeStep`` (s): the device's time step (``device.getTimeStep()``; assigning it
+      calls ``device.setTimeStep``); ``dimension``: nv; ``OperationalPointsMap``: the
+      op points (SoT name -> Pinocchio frame), ``OperationalPoints``: their names;
+      ``pinocchioModel``, ``pinocchioData``: the model and the ``Dynamic``'s data;
+    - the tracer of SoT's robot: ``initializeTracer()`` (a ``Tracer`` ``"trace"`` whose
+      files are ``/tmp/dg_<entity>-<signal>.dat``, triggered by ``device.after``),
+      ``addTrace(entityName, signalName)``, ``traceDefaultSignals()``,
+      ``startTracer()``, ``stopTracer()`` (dump, stop, close, clear; the tracer is
+      then forgotten); ``tracerSize`` is in rows (SoT's was bytes per signal);
+    - ``reset(posture)``, ``getActuatedJoints()``, ``setJointValueInConfig(q, names,
+      values)``, ``createFrame(name, aMb, opPoint)`` (an ``OpPointModifier``),
+      ``initializeRobot()`` (the device back to half-sitting, at rest).
+    """
+
+    tracer: Any = None
+    tracerSize: int = 10_000
+    #: dynamic's signals, then the device's, that traceDefaultSignals traces (SoT's)
+    tracedSignals: dict[str, list[str]] = {
+        "dynamic": ["com", "zmp", "angularmomentum", "position", "velocity", "acceleration"],
+        "device": ["zmp", "control", "state"],
+    }
+
+    name: str
+    model: Any
+    dynamic: Any
+    device: Any
+    opPoints: dict[str, str]
+    halfSitting: np.ndarray
+
+    # -- SoT's attributes ----------------------------------------------------------------
+    @property
+    def timeStep(self) -> float:
+        """The device's time step, s (``device.getTimeStep()``)."""
+        return float(self.device.getTimeStep())
+
+    @timeStep.setter
+    def timeStep(self, dt: float) -> None:
+        self.device.setTimeStep(dt)
+
+    @property
+    def dimension(self) -> int:
+        """nv: the size of the velocity, of the control and of the Jacobians' rows."""
+        return int(self.model.nv)
+
+    @dimension.setter
+    def dimension(self, n: int) -> None:
+        if n != self.model.nv:
+            raise RobotError(
+                f"robot {self.name!r}: its dimension is nv = {self.model.nv} (the model's), got {n}"
+            )
+
+    @property
+    def OperationalPointsMap(self) -> dict[str, str]:
+        """SoT name -> Pinocchio frame of each op point (the dict itself)."""
+        return self.opPoints
+
+    @OperationalPointsMap.setter
+    def OperationalPointsMap(self, mapping: dict[str, str]) -> None:
+        self.opPoints = dict(mapping)
+
+    @property
+    def OperationalPoints(self) -> tuple[str, ...]:
+        """The op points' names (created on ``dynamic``)."""
+        return tuple(self.opPoints)
+
+    @property
+    def pinocchioModel(self) -> Any:
+        """The Pinocchio model (SoT's name)."""
+        return self.model
+
+    @property
+    def pinocchioData(self) -> Any:
+        """The ``Dynamic``'s Pinocchio data."""
+        return self.dynamic.data
+
+    # -- SoT's methods -------------------------------------------------------------------
+    def initializeRobot(self) -> None:
+        """Put the device back at half-sitting, at rest (SoT's ``initializeRobot`` also
+        built the device and the dynamic, which :func:`load_robot` did)."""
+        self.device.set(np.asarray(self.halfSitting, dtype=float).copy())
+        self.device.setVelocity(np.zeros(self.model.nv))
+
+    def createSimulator(self) -> Any:
+        """The simulated device (built with the robot): ``self.device``."""
+        return self.device
+
+    def initializeTracer(
+        self, dirname: str = "/tmp/", prefix: str = "dg_", suffix: str = ".dat"
+    ) -> Any:
+        """Create the robot's tracer if it has none: a ``Tracer("trace")`` of
+        ``tracerSize`` rows, whose files are ``dirname/prefix<name>suffix``, triggered
+        after each ``device.increment`` (``device.after``). Returns it."""
+        from ..graph import Tracer
+
+        if self.tracer is None:
+            tr = Tracer("trace")
+            tr.setBufferSize(self.tracerSize)
+            tr.open(dirname, prefix, suffix)
+            self.device.after.addSignal(tr.triger)
+            self.tracer = tr
+            self.autoRecomputedSignals = []
+        return self.tracer
+
+    def addTrace(self, entityName: str, signalName: str) -> None:
+        """Trace ``entityName.signalName`` in the robot's tracer (file
+        ``<entity>-<signal>``, SoT's name) if it has one (SoT's rule: nothing without
+        a tracer)."""
+        if self.tracer is None:
+            return
+        path = f"{entityName}.{signalName}"
+        self.tracer.add(path, f"{entityName}-{signalName}".replace("/", "_"))
+        self.autoRecomputedSignals.append(path)
+
+    def traceDefaultSignals(self) -> None:
+        """Trace the op points, the dynamic's ``tracedSignals["dynamic"]`` and the
+        device's ``tracedSignals["device"]`` (SoT's list)."""
+        for s in [*self.opPoints, *self.tracedSignals["dynamic"]]:
+            self.addTrace(self.dynamic.name, s)
+        for s in self.tracedSignals["device"]:
+            self.addTrace(self.device.name, s)
+
+    def startTracer(self) -> None:
+        """Start the robot's tracer (if it has one)."""
+        if self.tracer is not None:
+            self.tracer.start()
+
+    def stopTracer(self) -> None:
+        """Dump, stop, close and clear the robot's tracer, detach it from the device,
+        and forget it (SoT's ``stopTracer``)."""
+        tr = self.tracer
+        if tr is None:
+            return
+        tr.dump()
+        tr.stop()
+        tr.close()
+        tr.clear()
+        self.device.after.rmSignal(tr.triger, missing_ok=True)
+        self.autoRecomputedSignals = []
+        self.tracer = None
+
+    def reset(self, posture: Any = None) -> None:
+        """Put the device at ``posture`` (default half-sitting), at rest."""
+        q = self.halfSitting if posture is None else posture
+        self.device.set(np.asarray(q, dtype=float))
+        self.device.setVelocity(np.zeros(self.model.nv))
+
+    def getActuatedJoints(self) -> range:
+        """The velocity indices of the joints (after a free flyer's 6)."""
+        model = self.model
+        ff = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+        return range(6 if ff else 0, model.nv)
+
+    def setJointValueInConfig(self, q: np.ndarray, jointNames: Any, jointValues: Any) -> None:
+        """Write ``jointValues`` into ``q`` (in place) for the one-coordinate joints
+        ``jointNames`` of the model."""
+        model = self.model
+        for jn, jv in zip(jointNames, jointValues, strict=True):
+            if not model.existJointName(jn):
+                raise RobotError(f"robot {self.name!r}: no joint named {jn!r} in its model")
+            joint = model.joints[model.getJointId(jn)]
+            if joint.nq != 1:
+                raise RobotError(
+                    f"robot {self.name!r}: joint {jn!r} has {joint.nq} coordinates; write "
+                    "them into q directly"
+                )
+            q[joint.idx_q] = float(jv)
+
+    def createFrame(self, frameName: str, transformation: Any, operationalPoint: str) -> Any:
+        """An ``OpPointModifier`` called ``frameName``: the frame at ``transformation``
+        (aMb: 4 x 4 matrix or ``pinocchio.SE3``, m) in the op point ``operationalPoint``."""
+        from ..graph.signal import plug
+        from ..operators.op_point import OpPointModifier
+
+        frame = OpPointModifier(frameName)
+        frame.setTransformation(transformation)
+        plug(self.dynamic.signal(operationalPoint), frame.positionIN)
+        plug(self.dynamic.signal(f"J{operationalPoint}"), frame.jacobianIN)
+        return frame
+
+
 @dataclass(eq=False)
-class Robot:
+class Robot(HumanoidRobotAPI):
     """A loaded robot: Pinocchio model, ``Dynamic``, ``Device`` and its description.
 
     Attributes:
@@ -163,6 +352,10 @@ class Robot:
         feet: ``"left"``/``"right"`` -> :class:`Foot` (empty for arms).
         couplings: coupled joint name -> :class:`Coupling`.
         description: the parsed description (see :func:`robot_info`).
+
+    It also has the attributes and methods of SoT's humanoid robot class
+    (:class:`HumanoidRobotAPI`: ``timeStep``, ``dimension``, ``OperationalPointsMap``,
+    ``addTrace``, ``startTracer``...).
     """
 
     name: str

@@ -35,8 +35,7 @@ def homogeneousToSE3(M: Any, where: str = "", tolerance: float = ROTATION_TOLERA
         raise ValueError(f"{head}the homogeneous matrix has non-finite entries")
     if np.abs(M[3] - (0.0, 0.0, 0.0, 1.0)).max() > tolerance:
         raise ValueError(
-            f"{head}the last row of a homogeneous matrix must be (0, 0, 0, 1), "
-            f"got {M[3].tolist()}"
+            f"{head}the last row of a homogeneous matrix must be (0, 0, 0, 1), got {M[3].tolist()}"
         )
     R = M[:3, :3]
     err = float(np.abs(R.T @ R - np.eye(3)).max())
@@ -62,9 +61,7 @@ def _toSE3(v: Any) -> pin.SE3:
     try:
         return homogeneousToSE3(v)
     except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"expected a pinocchio.SE3 or a 4 x 4 homogeneous matrix: {exc}"
-        ) from None
+        raise ValueError(f"expected a pinocchio.SE3 or a 4 x 4 homogeneous matrix: {exc}") from None
 
 
 #: ``pinocchio.SE3`` placements; traced as the 16 entries of the homogeneous matrix

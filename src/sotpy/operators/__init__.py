@@ -5,7 +5,8 @@ Everything a script needs to wire signals together::
     from sotpy.operators import Selec_of_vector, Add_of_vector, Multiply_of_matrixHomo
 
 Class, signal and command names are sot-core's (``src/matrix/operator.cpp``,
-``derivator.hh``, ``switch.hh``, ``latch.hh``, ``integrator.hh``) and sot-tools'
+``derivator.hh``, ``switch.hh``, ``latch.hh``, ``integrator.hh``, ``op-point-modifier``,
+``joint-limitator``) and sot-tools'
 (``CubicInterpolationSE3``, ``Seqplay``): ``sin``/``sin1``/``sin2``/``sin0..sin{n-1}``
 in, ``sout`` out, ``selec(imin, imax)``, ``setSignalNumber(n)``... ``docs/operators.md``
 is the reference: each entity's signals, commands, formula and units, and where sotpy
@@ -15,6 +16,7 @@ Placements (SoT's ``MatrixHomogeneous``) are ``pinocchio.SE3`` values on signals
 type ``SE3``. The one-tick delays are the graph core's, re-exported here.
 """
 
+from .op_point import JointLimitator, OpPointModifier
 from .se3 import (
     Compose_R_and_T,
     HomoToMatrix,
@@ -45,8 +47,10 @@ from .vector import (
     Add_of_matrix,
     Add_of_vector,
     Component_of_vector,
+    MatrixConstant,
     Multiply_double_vector,
     Multiply_matrix_vector,
+    Multiply_of_double,
     Selec_of_vector,
     Stack_of_vector,
     Substract_of_double,
@@ -73,14 +77,18 @@ __all__ = [
     "HomoToMatrix",
     "Integrator",
     "Inverse_of_matrixHomo",
+    "JointLimitator",
     "Latch",
+    "MatrixConstant",
     "MatrixHomoToPose",
     "MatrixHomoToPoseUTheta",
     "MatrixToHomo",
     "Multiply_double_vector",
     "Multiply_matrixHomo_vector",
     "Multiply_matrix_vector",
+    "Multiply_of_double",
     "Multiply_of_matrixHomo",
+    "OpPointModifier",
     "PoseUThetaToMatrixHomo",
     "Selec_of_vector",
     "Seqplay",

@@ -30,6 +30,7 @@ __all__ = [
     "who",
 ]
 
+
 def who(entity: Any, command: str) -> str:
     """``Class(name).command``, the prefix of a command's error message."""
     return f"{entity.className}({entity.name}).{command}"

@@ -18,7 +18,8 @@ class                           signals                       sout
 ==============================  ============================  ============================
 
 A 4 x 4 homogeneous matrix enters an SE3 input through ``MatrixToHomo`` (plugged) or
-``pinocchio.SE3(M)`` (a constant), and leaves through ``HomoToMatrix``. Rotation
+as a constant (``sin.value = M``, an array or a tuple of rows as SoT writes it, or a
+``pinocchio.SE3``), and leaves through ``HomoToMatrix``. Rotation
 blocks given as matrices are checked (``R^T R = I``, ``det R = 1``, within 1e-5): a
 wrong matrix raises instead of producing a placement that is not rigid.
 """

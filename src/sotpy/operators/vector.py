@@ -14,7 +14,9 @@ class                       signals                       sout
 ``Substract_of_vector``     sin1, sin2 -> sout            ``sin1 - sin2`` (also double, matrix)
 ``Multiply_matrix_vector``  sin1 (matrix), sin2 -> sout   ``sin1 @ sin2``
 ``Multiply_double_vector``  sin1 (double), sin2 -> sout   ``sin1 * sin2``
+``Multiply_of_double``      sin0..sin{n-1} -> sout        ``sin0 * sin1 * ...`` (doubles)
 ``VectorConstant``          sout                          the vector given to ``set``
+``MatrixConstant``          sout                          the matrix given to ``set``
 ==========================  ============================  ==================================
 
 Every input size is checked when the output is computed: a mismatch raises
@@ -39,8 +41,10 @@ __all__ = [
     "Add_of_matrix",
     "Add_of_vector",
     "Component_of_vector",
+    "MatrixConstant",
     "Multiply_double_vector",
     "Multiply_matrix_vector",
+    "Multiply_of_double",
     "Selec_of_vector",
     "Stack_of_vector",
     "Substract_of_double",
@@ -433,6 +437,23 @@ class Multiply_double_vector(Entity):
         return k * x
 
 
+class Multiply_of_double(VariadicOp, Entity):
+    """Product of doubles: ``sout = sin0 * sin1 * ... * sin{n-1}`` (1 if n = 0)."""
+
+    _inType = DOUBLE
+    _inDoc = "factor"
+
+    def __init__(self, name: str) -> None:
+        self._initVariadic()
+
+    @Output(DOUBLE, timeDependent=False, doc="sin0 * sin1 * ...")
+    def sout(self, *xs: float) -> float:
+        out = 1.0
+        for x in xs:
+            out *= x
+        return out
+
+
 # -- constants ----------------------------------------------------------------------------
 class VectorConstant(Entity):
     """A constant vector: ``sout`` is the vector given to ``set`` (or zeros after
@@ -461,5 +482,36 @@ class VectorConstant(Entity):
     @command
     def set(self, value: VECTOR) -> None:  # type: ignore[valid-type]
         """Make ``sout`` the vector ``value``."""
+        self._value = np.array(value, dtype=float)
+        self.sout.setReady()
+
+
+class MatrixConstant(Entity):
+    """A constant matrix: ``sout`` is the matrix given to ``set`` (or zeros after
+    ``resize(rows, cols)``). Reading ``sout`` before either raises."""
+
+    def __init__(self, name: str) -> None:
+        self._value: np.ndarray | None = None
+
+    @Output(MATRIX, timeDependent=False, doc="the constant matrix")
+    def sout(self) -> np.ndarray:
+        if self._value is None:
+            raise SotpyError(
+                f"{self.sout.name}: no value: call {self.name}.set(matrix) or "
+                f"{self.name}.resize(rows, cols) first"
+            )
+        return self._value.copy()
+
+    @command
+    def resize(self, rows: int, cols: int) -> None:
+        """Make ``sout`` the zero matrix of ``rows`` x ``cols`` (>= 0)."""
+        if rows < 0 or cols < 0:
+            raise CommandError(f"{who(self, 'resize')}: expected sizes >= 0, got {rows} x {cols}")
+        self._value = np.zeros((rows, cols))
+        self.sout.setReady()
+
+    @command
+    def set(self, value: MATRIX) -> None:  # type: ignore[valid-type]
+        """Make ``sout`` the matrix ``value`` (a 2-D array or a tuple of rows)."""
         self._value = np.array(value, dtype=float)
         self.sout.setReady()

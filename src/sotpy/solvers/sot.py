@@ -3,6 +3,7 @@ r"""The ``SOT`` entity: a stack of tasks solved with strict priorities.
 ::
 
     sot = SOT("sot", robot.dynamic)          # nv from the dynamic's model
+    # or SoT's: sot = SOT("sot"); sot.setSize(nv) (no joint-limit level then)
     plug(robot.device.state, sot.position)   # done by the constructor when it can
     sot.dt.value = 0.001                     # control period (s), for the joint limits
     sot.push(taskFeet)                       # highest priority first
@@ -57,7 +58,7 @@ import numpy as np
 
 from .._jit import refused
 from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
-from ..graph import DOUBLE, VECTOR, Entity, Input, Output, command, plug
+from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, plug
 from ..graph.pool import pool
 from ..tasks import _rowkernels
 from ..tasks.rows import BufferFull, computedByOwnCallback
@@ -84,43 +85,109 @@ class SOT(Entity):
         """Solve the stack (see the module doc)."""
         return self._solve(values)
 
-    def __init__(self, name: str, dynamic: Entity) -> None:
-        model = getattr(dynamic, "model", None)
-        if model is None or not hasattr(model, "nv"):
-            raise EntityError(
-                f"SOT({name}): expected a Dynamic entity (with a Pinocchio model), got {dynamic!r}"
-            )
-        self.nv = int(model.nv)
-        self._qShape = (int(model.nq),)
+    def __init__(self, name: str, dynamic: Entity | None = None) -> None:
+        model = None
+        if dynamic is not None:
+            model = getattr(dynamic, "model", None)
+            if model is None or not hasattr(model, "nv"):
+                raise EntityError(
+                    f"SOT({name}): expected a Dynamic entity (with a Pinocchio model), got "
+                    f"{dynamic!r}"
+                )
+        self._model = model
+        self._nv: int | None = None
         self._stack: list[TaskAbstract] = []
-        self._jointLimits = True
+        # SoT's SOT has no joint-limit level: without a Dynamic there are no limits to
+        # read, so there is none either
+        self._jointLimits = model is not None
         self._solver = HierarchySolver()
         self.lastResult: Any = None
         self._warned = False
         self._limits: tuple[Any, ...] | None = None
         self._taskDamping: dict[str, float] = {}
-        self._rowsA = np.empty((64, self.nv))  # the fused tasks' rows (see _fusion)
-        self._rowsB = np.empty(64)
         # (fused plan, level sizes) of the last tick solved through _fusedLevels: the
         # next ticks of that plan write in place into the solver's buffers
         self._inPlace: tuple[Any, tuple[int, ...]] | None = None
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
-        for j in range(1, model.njoints):
-            joint = model.joints[j]
-            if joint.nq == 1 and joint.nv == 1:
-                iq.append(joint.idx_q)
-                iv.append(joint.idx_v)
+        if model is not None:
+            for j in range(1, model.njoints):
+                joint = model.joints[j]
+                if joint.nq == 1 and joint.nv == 1:
+                    iq.append(joint.idx_q)
+                    iv.append(joint.idx_v)
+            self._qShape = (int(model.nq),)
+            self._setSize(int(model.nv))
         self._iq = np.array(iq, dtype=int)
         self._iv = np.array(iv, dtype=int)
-        for sig in ("lowerJl", "upperJl", "upperVl"):
-            plug(dynamic.signal(sig), self.signal(sig))
-        source = dynamic.signal("position").source
-        if source is not None:
-            plug(source, self.position)
+        if dynamic is not None:
+            for sig in ("lowerJl", "upperJl", "upperVl"):
+                plug(dynamic.signal(sig), self.signal(sig))
+            source = dynamic.signal("position").source
+            if source is not None:
+                plug(source, self.position)
         self._rewire()
         self._fuse = False
         self.setTaskFusion(_rowkernels.pose_rows is not None)
+
+    @property
+    def nv(self) -> int:
+        """The size of ``control`` (the robot's nv): from the Dynamic, from ``setSize``,
+        or from the Jacobian of the first task pushed."""
+        n = self._nv
+        if n is None:
+            raise SotpyError(
+                f"SOT({self.name}): the size of the control is not known yet: call "
+                f"{self.name}.setSize(nv) (SoT's), push a task whose Jacobian can be "
+                "computed, or create SOT(name, dynamic)"
+            )
+        return n
+
+    def _setSize(self, nv: int) -> None:
+        self._nv = nv
+        self._rowsA = np.empty((64, nv))  # the fused tasks' rows (see _fusion)
+        self._rowsB = np.empty(64)
+        self._inPlace = None
+
+    @command
+    def setSize(self, nv: int) -> None:
+        """Set the size of the control (SoT's ``setSize``, the number of DoFs nv > 0).
+
+        With a Dynamic the size is its model's nv and only that value is accepted; without
+        one, it may be set before any task is pushed, or to the width of the tasks in the
+        stack."""
+        if nv <= 0:
+            raise CommandError(f"SOT({self.name}).setSize: expected a size > 0, got {nv}")
+        if self._model is not None and nv != self._model.nv:
+            raise CommandError(
+                f"SOT({self.name}).setSize: the size is nv = {self._model.nv}, the model's "
+                f"(SOT built on a Dynamic), got {nv}"
+            )
+        if self._nv is not None and nv != self._nv and self._stack:
+            raise CommandError(
+                f"SOT({self.name}).setSize: the tasks in the stack have {self._nv} columns, "
+                f"got {nv}; clear() the stack first"
+            )
+        if nv != self._nv:
+            self._setSize(nv)
+            self.control.setReady()
+
+    def _inferSize(self, task: TaskAbstract) -> None:
+        """Take the size from ``task``'s Jacobian (or its features' Jacobian inputs) when
+        it is not known yet."""
+        if self._nv is not None:
+            return
+        candidates = [task.jacobian]
+        for f in getattr(task, "_features", ()):
+            candidates += [s for s in f.signals() if s.type is MATRIX and s.direction == "input"]
+        for sig in candidates:
+            try:
+                J = sig.value
+            except SotpyError:
+                continue
+            if np.ndim(J) == 2 and np.shape(J)[1] > 0:
+                self._setSize(int(np.shape(J)[1]))
+                return
 
     # -- the stack --------------------------------------------------------------------
     def _task(self, task: TaskAbstract | str, cmd: str) -> TaskAbstract:
@@ -153,6 +220,7 @@ class SOT(Entity):
         task = self._task(task, "push")
         if any(t is task for t in self._stack):
             raise SotpyError(f"SOT({self.name}).push: {task.name} is already in the stack")
+        self._inferSize(task)
         self._checkWidth(task, "push")
         self._edit([*self._stack, task])
 
@@ -162,6 +230,28 @@ class SOT(Entity):
         task = self._task(task, "remove")
         i = self._index(task, "remove")
         self._edit(self._stack[:i] + self._stack[i + 1 :])
+
+    @command
+    def rm(self, task: Any) -> None:
+        """Remove ``task`` from the stack (sot-dyninv's name of ``remove``)."""
+        self.remove(task)
+
+    @command
+    def pop(self) -> str:
+        """Remove the last (lowest priority) task; returns its name."""
+        if not self._stack:
+            raise SotpyError(f"SOT({self.name}).pop: the stack is empty")
+        last = self._stack[-1]
+        self._edit(self._stack[:-1])
+        return last.name
+
+    @command
+    def dispStack(self) -> str:
+        """The stack as text, one ``| name`` line per task, highest priority first
+        (sot-dyninv's ``dispStack``, which scripts split on ``|``)."""
+        lines = ["+-----------------", f"+   SOT {self.name}", "+-----------------"]
+        lines += [f"| {t.name}" for t in self._stack]
+        return "\n".join(lines) + "\n"
 
     @command
     def up(self, task: Any) -> None:
@@ -237,7 +327,7 @@ class SOT(Entity):
 
     @command
     def getSize(self) -> int:
-        """nv, the size of ``control``."""
+        """nv, the size of ``control`` (raises while it is not known)."""
         return self.nv
 
     def _edit(self, stack: list[TaskAbstract]) -> None:

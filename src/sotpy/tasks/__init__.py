@@ -18,6 +18,7 @@ from .features import (
     FeatureAbstract,
     FeatureGeneric,
     FeatureJointLimits,
+    FeaturePoint6d,
     FeaturePose,
     FeaturePoseSE3,
     FeaturePosture,
@@ -26,7 +27,15 @@ from .features import (
     interactionMatrix,
 )
 from .gain import GainAdaptive
-from .meta_task import MetaTaskKine6d, MetaTaskKineCom, MetaTaskKinePosture, setGain
+from .meta_task import (
+    MetaTaskKine6d,
+    MetaTaskKineCom,
+    MetaTaskKinePosture,
+    goto6d,
+    gotoNd,
+    setGain,
+    toFlags,
+)
 from .task import Task, TaskAbstract, TaskInequality
 
 __all__ = [
@@ -35,6 +44,7 @@ __all__ = [
     "FeatureAbstract",
     "FeatureGeneric",
     "FeatureJointLimits",
+    "FeaturePoint6d",
     "FeaturePose",
     "FeaturePoseSE3",
     "FeaturePosture",
@@ -47,6 +57,9 @@ __all__ = [
     "Task",
     "TaskAbstract",
     "TaskInequality",
+    "goto6d",
+    "gotoNd",
     "interactionMatrix",
     "setGain",
+    "toFlags",
 ]

@@ -28,6 +28,7 @@ class                       full error ``e``                                  ro
 ==========================  ================================================  ==========
 ``FeaturePose``             ``(t(M*^-1 M), log3(R*^T R))``                    6
 ``FeaturePoseSE3``          ``log6(M*^-1 M)``                                 6
+``FeaturePoint6d``          ``FeaturePose``'s, the reference a second one     6
 ``FeatureGeneric``          ``errorIN - reference.errorIN``                   any
 ``FeaturePosture``          ``difference(q*, q)`` (``q = q* (+) e``)          nv
 ``FeatureJointLimits``      ``2 (q - l) / (u - l) - 1``                       nv
@@ -48,8 +49,20 @@ import pinocchio as pin
 
 from ..dynamics.types import SE3
 from ..errors import CommandError, EntityError, SignalTypeError
-from ..graph import DOUBLE, INT, MATRIX, VECTOR, Entity, Input, Output, SignalType, command, pool
-from ..graph.signal import Signal
+from ..graph import (
+    DOUBLE,
+    INT,
+    MATRIX,
+    VECTOR,
+    Entity,
+    Input,
+    Output,
+    SignalType,
+    command,
+    plug,
+    pool,
+)
+from ..graph.signal import InputSignal, Signal
 from . import _rowkernels
 from .rows import BufferFull, RowWriter, callbackWriter, computedByOwnCallback
 
@@ -59,6 +72,7 @@ __all__ = [
     "FeatureAbstract",
     "FeatureGeneric",
     "FeatureJointLimits",
+    "FeaturePoint6d",
     "FeaturePose",
     "FeaturePoseSE3",
     "FeaturePosture",
@@ -797,6 +811,43 @@ class FeaturePoseSE3(FeaturePose):
 
     def _poseErrordot(self, rel: pin.SE3, R: None, nu: np.ndarray) -> np.ndarray:
         return -pin.Jlog6(rel) @ rel.actInv(pin.Motion(nu)).vector
+
+
+class FeaturePoint6d(FeaturePose):
+    """SoT's ``FeaturePoint6d``: a :class:`FeaturePose` whose reference may be a second
+    feature of the same class, as SoT scripts build it.
+
+    ``setReference(featureDes)`` (an entity or its name) makes ``reference`` follow
+    ``featureDes.position`` (``plug(featureDes.position, reference)``): writing the
+    desired placement in ``featureDes.position`` moves the target, and ``keep()``
+    writes the current placement there. Without a reference feature it is a
+    :class:`FeaturePose` (``reference`` is the desired placement). Errors, Jacobians,
+    ``frame('current'|'desired')``: those of :class:`FeaturePose`.
+    """
+
+    className = "FeaturePoint6d"
+
+    _acceptsReferenceFeature = True
+
+    def _wire(self) -> None:
+        ref = self._reference
+        if ref is not None and self.reference.source is not ref.position:  # type: ignore[attr-defined]
+            plug(ref.position, self.reference)  # type: ignore[attr-defined]
+        elif ref is None and isinstance(self.reference.source, InputSignal):
+            self.reference.unplug()
+        super()._wire()
+
+    @command
+    def keep(self) -> None:
+        """Make the current placement the desired one: written in the reference
+        feature's ``position`` when there is one (SoT's), else in ``reference``; the
+        reference velocity becomes zero."""
+        M = self.position.value
+        if self._reference is not None:
+            self._reference.position.value = M  # type: ignore[attr-defined]
+        else:
+            self.reference.value = M
+        self.referenceVelocity.value = np.zeros(6)
 
 
 # -- model-based features -------------------------------------------------------------

@@ -5,7 +5,9 @@
 
     rh = MetaTaskKine6d("rh", robot.dynamic, "right-wrist")
     rh.keep()                                      # hold the current placement
+    rh.opmodif = pin.SE3(np.eye(3), [0.1, 0, 0])   # control a point 10 cm along x
     rh.gotoNd([0.3, -0.3, 1.0], "111000", 1.0)     # position only, gain 1/s
+    gotoNd(rh, [0.3, -0.3, 1.0], "111000", 1.0)    # the same, SoT's function
     sot.push(rh.task.name)
 
     com = MetaTaskKineCom(robot.dynamic)           # featurecom, featureDescom, taskcom
@@ -21,6 +23,10 @@ reference input.
 
 Selection flags are read left to right (``"111000"``: the translation; see
 :mod:`sotpy.tasks.features`).
+
+A meta-task refuses an attribute it does not have (``AttributeError`` naming it and
+the meta-task's attributes): a typo, or a SoT attribute this meta-task lacks, is never
+silently stored and ignored.
 """
 
 from __future__ import annotations
@@ -32,13 +38,64 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics import Device, Dynamic
+from ..dynamics.types import homogeneousToSE3
 from ..errors import CommandError, EntityError
 from ..graph import Entity, plug, pool
+from ..operators.op_point import OpPointModifier
 from .features import FeatureGeneric, FeaturePose, FeaturePosture, Flags
 from .gain import GainAdaptive
 from .task import Task
 
-__all__ = ["MetaTaskKine6d", "MetaTaskKineCom", "MetaTaskKinePosture", "setGain"]
+__all__ = [
+    "MetaTaskKine6d",
+    "MetaTaskKineCom",
+    "MetaTaskKinePosture",
+    "goto6d",
+    "gotoNd",
+    "setGain",
+    "toFlags",
+]
+
+
+def toFlags(spec: Any) -> Flags:
+    """SoT's ``toFlags``: a flag string (``"111000"``) or a sequence of booleans as
+    :class:`Flags` takes them, or a sequence of row indices (``range(6, 12)``; the
+    meaning old SoT scripts give it): those rows selected, the others not."""
+    if isinstance(spec, (str, Flags, bool, np.bool_)):
+        return Flags(spec)
+    items = list(spec)
+    if items and all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) for i in items):
+        if any(i < 0 for i in items):
+            raise CommandError(f"toFlags: row indices must be >= 0, got {items}")
+        if not all(i in (0, 1) for i in items) or len(items) == 1:
+            bits = [False] * (max(items) + 1)
+            for i in items:
+                bits[i] = True
+            return Flags(bits)
+    return Flags(items)
+
+
+def gotoNd(
+    task: Any,
+    position: Any,
+    selec: str | Flags | Sequence[bool] | None = None,
+    gain: float | Sequence[float] | None = None,
+    resetJacobian: bool = True,
+) -> None:
+    """SoT's ``gotoNd(task, position, selec, gain)``: ``task.gotoNd(position, selec,
+    gain)`` for a :class:`MetaTaskKine6d` or :class:`MetaTaskKineCom` (see their
+    method). ``resetJacobian`` (SoT's, for ``TaskPD``) has no effect here."""
+    method = getattr(task, "gotoNd", None)
+    if method is None:
+        raise CommandError(
+            f"gotoNd: {task!r} is not a meta-task with a target (MetaTaskKine6d, MetaTaskKineCom)"
+        )
+    method(position, selec, gain)
+
+
+def goto6d(task: Any, position: Any, gain: float | Sequence[float] | None = None) -> None:
+    """SoT's ``goto6d``: :func:`gotoNd` with every row selected (``"111111"``)."""
+    gotoNd(task, position, "111111", gain)
 
 
 def setGain(gain: GainAdaptive, value: float | Sequence[float] | None) -> None:
@@ -65,6 +122,22 @@ def setGain(gain: GainAdaptive, value: float | Sequence[float] | None) -> None:
 
 class _MetaTask:
     """Entity bookkeeping shared by the meta-tasks."""
+
+    _constructed = False
+
+    def __setattr__(self, attr: str, value: Any) -> None:
+        if (
+            self._constructed
+            and not attr.startswith("_")
+            and attr not in self.__dict__
+            and not hasattr(type(self), attr)
+        ):
+            known = sorted(a for a in (*self.__dict__, *dir(type(self))) if not a.startswith("_"))
+            raise AttributeError(
+                f"{type(self).__name__}({self.name!r}) has no attribute {attr!r}: it is "
+                f"not stored (it would be ignored); its attributes: {', '.join(known)}"
+            )
+        object.__setattr__(self, attr, value)
 
     def _reserve(self, kind: str, names: list[str]) -> None:
         taken = [n for n in names if pool.hasEntity(n)]
@@ -105,13 +178,20 @@ class MetaTaskKine6d(_MetaTask):
       ``dynamic.J<opPoint>`` -> ``Jq``, selection ``"111111"``;
     - ``task`` = ``Task('task' + name)`` with the feature;
     - ``gain`` = ``GainAdaptive('gain' + name)``, constant 0.1 1/s (SoT's default):
-      ``task.error`` -> ``gain.error``, ``gain.gain`` -> ``task.controlGain``.
+      ``task.error`` -> ``gain.error``, ``gain.gain`` -> ``task.controlGain``;
+    - ``opPointModif`` = ``OpPointModifier('opmodif' + name)`` on the op point,
+      inactive until ``opmodif`` is set.
 
     ``keep()`` holds the current placement; ``gotoNd(position, selec, gain)`` sets a
-    target; ``ref`` is the desired placement.
+    target; ``ref`` is the desired placement. ``opmodif = aMb`` (a 4 x 4 homogeneous
+    matrix, a tuple of its rows or a ``pinocchio.SE3``; m) makes the task control the
+    frame ``b`` rigidly attached to the op point ``a`` (a grip point, a tool tip)
+    instead of ``a`` itself: the feature then reads the modifier's ``position`` and
+    ``jacobian``; ``opmodif = False`` goes back to the op point. Reading ``opmodif``
+    gives ``aMb`` as a 4 x 4 matrix, or ``False`` when inactive (SoT's).
     """
 
-    _entityAttributes = ("feature", "task", "gain")
+    _entityAttributes = ("feature", "task", "gain", "opPointModif")
 
     def __init__(
         self,
@@ -128,7 +208,10 @@ class MetaTaskKine6d(_MetaTask):
             )
         self.dynamic = self.dyn = dynamic
         self.opPoint = opPoint
-        self._reserve("MetaTaskKine6d", ["feature" + name, "task" + name, "gain" + name])
+        self._reserve(
+            "MetaTaskKine6d",
+            ["feature" + name, "task" + name, "gain" + name, "opmodif" + name],
+        )
         created = False
         if not dynamic.hasSignal(opPoint):
             if frame is None:
@@ -148,7 +231,10 @@ class MetaTaskKine6d(_MetaTask):
             self.feature = featureClass("feature" + name)
             self.task = Task("task" + name)
             self.gain = GainAdaptive("gain" + name)
+            self.opPointModif = OpPointModifier("opmodif" + name)
             self.feature.selec.value = "111111"
+            plug(dynamic.signal(opPoint), self.opPointModif.positionIN)
+            plug(dynamic.signal("J" + opPoint), self.opPointModif.jacobianIN)
             plug(dynamic.signal(opPoint), self.feature.position)
             plug(dynamic.signal("J" + opPoint), self.feature.Jq)
             self.task.add(self.feature)
@@ -161,6 +247,41 @@ class MetaTaskKine6d(_MetaTask):
             if created:
                 dynamic.destroyOpPoint(opPoint)
             raise
+        self._constructed = True
+
+    @property
+    def opmodif(self) -> np.ndarray | bool:
+        """``aMb`` (4 x 4) of the controlled frame in the op point, or ``False`` when
+        the task controls the op point itself (see the class doc)."""
+        if not self.opPointModif.activ:
+            return False
+        return self.opPointModif.getTransformation()
+
+    @opmodif.setter
+    def opmodif(self, aMb: Any) -> None:
+        modifier, dyn = self.opPointModif, self.dynamic
+        if isinstance(aMb, (bool, np.bool_)):
+            if aMb:
+                raise CommandError(
+                    f"MetaTaskKine6d({self.name!r}).opmodif: True is not a placement; give "
+                    "aMb (a 4 x 4 homogeneous matrix or a pinocchio.SE3), or False"
+                )
+            plug(dyn.signal(self.opPoint), self.feature.position)
+            plug(dyn.signal("J" + self.opPoint), self.feature.Jq)
+            modifier.activ = False
+            return
+        if isinstance(aMb, pin.SE3):
+            M = aMb
+        else:
+            try:
+                M = homogeneousToSE3(aMb, f"MetaTaskKine6d({self.name!r}).opmodif")
+            except (TypeError, ValueError) as exc:
+                raise CommandError(f"{exc}; the task is left unchanged") from None
+        modifier.setTransformation(M)
+        if not modifier.activ:
+            plug(modifier.position, self.feature.position)
+            plug(modifier.jacobian, self.feature.Jq)
+            modifier.activ = True
 
     @property
     def ref(self) -> pin.SE3:
@@ -172,8 +293,9 @@ class MetaTaskKine6d(_MetaTask):
         self.feature.reference.value = self._toSE3(M)
 
     def keep(self) -> None:
-        """Hold the current placement: reference = the op point's placement now, with a
-        zero reference velocity (the error becomes zero)."""
+        """Hold the current placement: reference = the controlled frame's placement now
+        (the op point, or the frame of ``opmodif``), with a zero reference velocity (the
+        error becomes zero)."""
         self.feature.keep()
 
     def gotoNd(
@@ -273,6 +395,7 @@ class MetaTaskKineCom(_MetaTask):
             plug(self.gain.gain, self.task.controlGain)
 
         self._build(steps)
+        self._constructed = True
 
     @property
     def ref(self) -> np.ndarray:
@@ -364,6 +487,7 @@ class MetaTaskKinePosture(_MetaTask):
             plug(self.gain.gain, self.task.controlGain)
 
         self._build(steps)
+        self._constructed = True
 
     @property
     def model(self) -> pin.Model:

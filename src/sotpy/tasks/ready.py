@@ -43,7 +43,8 @@ one, else it must be set (``robot.tasks["balance"].task.dt.value = dt``).
 Entity names start with the robot's prefix (that of ``load_robot(name, prefix)``, read
 from ``robot.dynamic``'s name ``<prefix>_dynamic``), so that two robots in one pool do
 not collide: the meta-task of key ``k`` is named ``_<prefix>_<k>``, hence the entities
-``feature_<prefix>_<k>``, ``task_<prefix>_<k>``, ``gain_<prefix>_<k>`` (and
+``feature_<prefix>_<k>``, ``task_<prefix>_<k>``, ``gain_<prefix>_<k>`` (an op point's
+also ``opmodif_<prefix>_<k>``, its ``OpPointModifier``; and
 ``featureDes_<prefix>_com``, ``polygon_<prefix>_balance``,
 ``couplings_<prefix>_couplings``).
 
