@@ -15,6 +15,7 @@
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
     sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
     sotpy connect [--connection-file PATH]
+    sotpy run SCRIPT.py [ARG ...]
 
 Each sub-command is a function ``add_<name>(subparsers)`` that adds its parser and sets
 ``func`` (the function run with the parsed arguments, returning the exit code); add a
@@ -357,9 +358,42 @@ def add_connect(subparsers: Any) -> None:
     p.set_defaults(func=_connect_run)
 
 
+# -- run ---------------------------------------------------------------------------------
+def _run_run(args: argparse.Namespace) -> int:
+    import traceback
+
+    from .compat import run
+
+    try:
+        return run(args.script, args.args)
+    except FileNotFoundError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    except Exception:
+        traceback.print_exc()
+        return 1
+
+
+def add_run(subparsers: Any) -> None:
+    """``sotpy run SCRIPT.py [ARG ...]``: a SoT Python script, unmodified."""
+    p = subparsers.add_parser(
+        "run",
+        help="run a SoT Python script unmodified (its dynamic_graph imports served by sotpy)",
+        description="Run a Stack of Tasks Python script as it is: its imports of "
+        "dynamic_graph (dynamic-graph-python, sot-core, sot-dynamic-pinocchio, sot-talos, "
+        "sot-tools, the tutorial) are served by sotpy for the run. What sotpy does not "
+        "provide raises an error naming the SoT feature and sotpy's equivalent. Exit "
+        "code: the script's (1 if it raised). See docs/porting.md.",
+    )
+    p.add_argument("script", metavar="SCRIPT.py", help="the SoT script")
+    p.add_argument("args", nargs=argparse.REMAINDER, metavar="ARG", help="its arguments")
+    p.set_defaults(func=_run_run)
+
+
 #: The functions that each add one sub-command to the parser's sub-parsers.
 SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots]
 SUBCOMMANDS += [add_shell, add_serve, add_connect]
+SUBCOMMANDS += [add_run]
 
 
 # -- entry point -----------------------------------------------------------------------

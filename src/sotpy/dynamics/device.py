@@ -141,6 +141,7 @@ __all__ = [
     "ROUNDING_TOLERANCE",
     "Device",
     "RobotSimu",
+    "configurationFromRollPitchYaw",
 ]
 
 #: Control types and what the control is.
@@ -167,6 +168,29 @@ ROUNDING_TOLERANCE = 1e-9
 #: Default Baumgarte gains of the contacts: Kp in s^-2, Kd in s^-1 (critically damped).
 DEFAULT_CONTACT_KP = 100.0
 DEFAULT_CONTACT_KD = 20.0
+
+
+def configurationFromRollPitchYaw(model: pin.Model, q: Any) -> np.ndarray:
+    """SoT's configuration of a free-flyer robot (size nv: the base's x, y, z (m), then
+    roll, pitch, yaw (rad) of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, then the joints) as a
+    Pinocchio configuration (size nq: the base's position, its unit quaternion
+    ``(x, y, z, w)``, the joints). A configuration of size nq is returned as it is.
+
+    Raises:
+        CommandError: ``q`` has neither size, or the model has no free flyer.
+    """
+    q = np.asarray(q, dtype=np.float64).ravel()
+    if q.shape == (model.nq,):
+        return q
+    free = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
+    if not free or q.shape != (model.nv,):
+        raise CommandError(
+            f"model {model.name!r}: expected a configuration of size nq = {model.nq}"
+            + (f" or SoT's nv = {model.nv} (roll-pitch-yaw base)" if free else "")
+            + f", got shape {q.shape}"
+        )
+    quat = pin.Quaternion(pin.rpy.rpyToMatrix(q[3], q[4], q[5])).coeffs()  # (x, y, z, w)
+    return np.concatenate((q[:3], quat, q[6:]))
 
 
 def _bound_array(values: np.ndarray, sign: float) -> np.ndarray:
@@ -362,14 +386,19 @@ class Device(Entity):
     def set(self, q: np.ndarray) -> None:
         """Set the configuration q (size nq; m, rad, free-flyer quaternion (x, y, z, w))
 
-        The quaternions are normalised. The state is written at the current tick
+        The quaternions are normalised. With a free flyer, SoT's configuration of size nv
+        (the base as x, y, z, roll, pitch, yaw) is accepted too and converted
+        (:func:`configurationFromRollPitchYaw`). The state is written at the current tick
         (``pool.time``), so everything that reads it is recomputed at its next read. The
         contacts (``setContacts``) are re-anchored at the new frame placements.
         """
         q = np.asarray(q, dtype=np.float64)
+        if self._freeFlyer and q.shape == (self._nv,):
+            q = configurationFromRollPitchYaw(self._model, q)
         if q.shape != (self._nq,):
+            nv = f" (or SoT's nv = {self._nv}, roll-pitch-yaw)" if self._freeFlyer else ""
             raise CommandError(
-                f"{self._who('set')}: expected a configuration of size nq = {self._nq}, "
+                f"{self._who('set')}: expected a configuration of size nq = {self._nq}{nv}, "
                 f"got shape {q.shape}; the state is left unchanged"
             )
         if not np.isfinite(q).all():

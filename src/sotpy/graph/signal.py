@@ -114,6 +114,10 @@ class Signal:
         """``entity.shortName``, the form :meth:`Pool.getSignal` takes."""
         return f"{self.entity.name}.{self.shortName}"
 
+    def getName(self) -> str:
+        """The full name (dynamic-graph-python's ``getName()``, as :attr:`name`)."""
+        return self.name
+
     def __repr__(self) -> str:
         return f"<{self.display()}>"
 

@@ -176,7 +176,7 @@ class Tracer(Entity):
         self._head = 0
         self.dropped = 0
         self.full = False
-        if not hasattr(self, "_buffers"):  # the buffers are kept for the next rows
+        if not hasattr(self, "_ticks"):  # the buffers are kept for the next rows
             self._buffers: list[Any] | None = None
             self._ticks: Any = None
 

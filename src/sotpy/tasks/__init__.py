@@ -27,6 +27,7 @@ from .features import (
     interactionMatrix,
 )
 from .gain import GainAdaptive
+from .joint_limits import TaskJointLimits
 from .meta_task import (
     MetaTaskKine6d,
     MetaTaskKineCom,
@@ -57,6 +58,7 @@ __all__ = [
     "Task",
     "TaskAbstract",
     "TaskInequality",
+    "TaskJointLimits",
     "goto6d",
     "gotoNd",
     "interactionMatrix",

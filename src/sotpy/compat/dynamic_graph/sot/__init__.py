@@ -1,0 +1,1 @@
+"""SoT's ``dynamic_graph.sot`` namespace, served by sotpy."""
