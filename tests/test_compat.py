@@ -310,3 +310,127 @@ def test_romeo_application_script(tmp_path):
     for k in (10, steps - 1):
         nxt = pin.integrate(model, state[k - 1, 1:], control[k - 1, 1:] * dt)
         np.testing.assert_allclose(nxt, state[k, 1:], atol=1e-9)
+
+
+# -- the modules, one by one -----------------------------------------------------------
+def test_matrix_util_against_pinocchio(hook):
+    from dynamic_graph.sot.core import matrix_util as mu
+
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        r, p, y = rng.uniform(-1.5, 1.5, 3)
+        M = np.array(mu.rpy2tr(r, p, y))
+        np.testing.assert_allclose(M[:3, :3], pin.rpy.rpyToMatrix(r, p, y), atol=1e-14)
+        pose = [*rng.uniform(-1, 1, 3), r, p, y]
+        H = mu.RPYToMatrix(pose)
+        np.testing.assert_allclose(H[:3, 3], pose[:3])
+        np.testing.assert_allclose(mu.matrixToRPY(H), pose, atol=1e-12)
+        np.testing.assert_allclose(mu.tr2rpy(H), [y, p, r], atol=1e-12)  # sot-core's order
+        se3 = pin.SE3(H[:3, :3], H[:3, 3])
+        assert mu.matrixToTuple(se3) == mu.matrixToTuple(H)  # a pinocchio.SE3 is a matrix
+        for axis, R in (("x", pin.utils.rotate("x", r)), ("z", pin.utils.rotate("z", y))):
+            np.testing.assert_allclose(
+                np.array(mu.rotate(axis, r if axis == "x" else y))[:3, :3], R
+            )
+        q = rng.standard_normal(4)
+        q /= np.linalg.norm(q)
+        np.testing.assert_allclose(
+            mu.quaternionToMatrix(q), pin.Quaternion(q[3], *q[:3]).toRotationMatrix(), atol=1e-14
+        )
+        v = rng.standard_normal(3)
+        Q = np.array(mu.generateOrthonormalM(v))
+        np.testing.assert_allclose(Q.T @ Q, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(Q[:, 0], v / np.linalg.norm(v), atol=1e-12)
+        assert np.linalg.det(Q) == pytest.approx(1.0)
+    assert mu.vectorToTuple(np.array([[1.0], [2.0]])) == (1.0, 2.0)
+    assert mu.vectorToTuple(np.array([[1.0, 2.0]])) == (1.0, 2.0)
+    assert mu.matrixToTuple(np.eye(2)) == ((1.0, 0.0), (0.0, 1.0))
+    assert mu.distVector(np.eye(4), mu.RPYToMatrix([1, 2, 3, 0, 0, 0])) == [1.0, 2.0, 3.0]
+    # at pitch = pi/2 the angles are not unique: yaw is 0, roll takes the rotation
+    gimbal = mu.rpy2tr(0.0, math.pi / 2, 0.4)
+    back = mu.matrixToRPY(gimbal)
+    assert back[5] == 0.0 and back[4] == pytest.approx(math.pi / 2)
+    np.testing.assert_allclose(mu.RPYToMatrix(back), gimbal, atol=1e-9)
+    with pytest.raises(ValueError, match="axis"):
+        mu.rotate("w", 1.0)
+
+
+def test_sot_meta_tasks_semantics(hook):
+    """SoT's MetaTaskKine6d: a FeaturePoint6d in the current frame whose reference is
+    featureDes; gotoNd's 3-vector has the identity orientation; the posture's gotoq
+    takes SoT's order and selects the joints it names."""
+    from dynamic_graph.sot.core.meta_task_posture import MetaTaskKinePosture
+    from dynamic_graph.sot.core.meta_tasks_kine import MetaTaskKine6d, gotoNd
+
+    from sotpy.dynamics import load_robot
+    from sotpy.tasks import FeaturePoint6d, Flags
+
+    robot = load_robot("talos")
+    rh = MetaTaskKine6d("rh", robot.dynamic, "rh", "arm_right_7_joint")
+    assert rh.dynamic.hasSignal("rh") and isinstance(rh.featureDes, FeaturePoint6d)
+    assert rh.featureDes.name == "featurerh_ref" and rh.feature.getFrame() == "current"
+    assert rh.feature.reference.source is rh.featureDes.position
+    gotoNd(rh, (0.4, -0.3, 1.0), "111", 1.0)
+    M = rh.featureDes.position.value
+    np.testing.assert_array_equal(M.rotation, np.eye(3))  # SoT's generic6dReference
+    np.testing.assert_array_equal(M.translation, [0.4, -0.3, 1.0])
+    assert rh.feature.selec.value == Flags("111") and rh.ref.isApprox(M)
+    # current frame: the target seen from the hand, in the hand's axes
+    W = robot.dynamic.signal("rh").value
+    np.testing.assert_allclose(rh.feature.error.value, W.actInv(M).translation, atol=1e-12)
+    rh.keep()
+    assert rh.featureDes.position.value.isApprox(W)
+    posture = MetaTaskKinePosture(robot.dynamic)
+    q = robot.halfSitting.copy()
+    posture.gotoq(2.0, q, arm_left_4_joint=-1.0, arm_left_1_joint=[])
+    model = robot.model
+    iv = [model.joints[model.getJointId(n)].idx_v for n in ("arm_left_1_joint", "arm_left_4_joint")]
+    assert posture.feature.selec.value.rows(model.nv).tolist() == sorted(iv)
+    k = model.joints[model.getJointId("arm_left_4_joint")].idx_q
+    assert posture.ref[k] == -1.0 and posture.gain.gain.value == pytest.approx(2.0)
+    q_sot = np.r_[q[:3], 0.0, 0.0, 0.1, q[7:]]  # SoT's roll-pitch-yaw configuration
+    posture.featureDes.errorIN.value = q
+    posture.ref = q_sot
+    np.testing.assert_allclose(
+        posture.ref[3:7], pin.Quaternion(pin.rpy.rpyToMatrix(0, 0, 0.1)).coeffs()
+    )
+
+
+def test_tracer_real_time_buffer_in_bytes(hook, tmp_path):
+    from dynamic_graph.tracer_real_time import TracerRealTime
+    from dynamic_graph.tutorial import InvertedPendulum
+
+    a = InvertedPendulum("IP")
+    tr = TracerRealTime("trace")
+    assert tr.getBufferSize() == 1 << 20
+    tr.setBufferSize(8 * 4 * 10)  # bytes per signal: 10 rows of 4 values
+    tr.add("IP.state", "state")
+    tr.open(str(tmp_path), "dg_", ".dat")
+    tr.start()
+    tr.triger.recompute(0)
+    assert "1/10 rows" in tr.status()  # 10 rows: the bytes over 8-byte values of width 4
+    tr.close()
+    assert np.loadtxt(tmp_path / "dg_state.dat").shape == (5,)
+    assert a.state.value.shape == (4,)
+
+
+def test_dynamic_pinocchio_and_the_older_humanoid_robot(hook):
+    from dynamic_graph.sot.dynamic_pinocchio import DynamicPinocchio, fromSotToPinocchio
+    from dynamic_graph.sot.dynamic_pinocchio.humanoid_robot import HumanoidRobot
+
+    model = load_model("talos")[0]
+    d = DynamicPinocchio("d")
+    with pytest.raises(UnsupportedFeature, match=r"before setModel.*d\.setModel"):
+        d.position  # noqa: B018
+    d.setModel(model)
+    d.setData(model.createData())
+    assert d.getDimension() == 38 and d.position is pool.getEntity("d").position
+    q_sot = np.zeros(38)
+    q_sot[2], q_sot[3:6] = 1.0, (0.1, -0.2, 0.3)
+    q = fromSotToPinocchio(q_sot)
+    R = pin.Quaternion(q[3:7]).toRotationMatrix()
+    np.testing.assert_allclose(pin.rpy.matrixToRpy(R), [0.1, -0.2, 0.3], atol=1e-12)
+    robot = HumanoidRobot("old", model, None, q_sot, {"left-wrist": "arm_left_7_joint"})
+    np.testing.assert_allclose(robot.device.state.value, q, atol=1e-12)
+    assert robot.dynamic.hasSignal("left-wrist") and robot.OperationalPoints == ["left-wrist"]
+    assert robot.timeStep == 0.005

@@ -619,3 +619,45 @@ def test_compiled_step_checks_are_their_numpy_twins():
         assert dev._finite_c(x) == dev._finite_np(x)
     assert dev._inside_c(np.array([np.nan]), np.zeros(1), np.ones(1))  # as the comparisons
     assert not dev._finite_c(np.array([0.0, np.inf]))
+
+
+# -- SoT's names: RobotSimu, resize, zmp, setTimeStep, roll-pitch-yaw configurations --
+def test_sot_names_of_the_device(talos):
+    from sotpy.dynamics import RobotSimu
+
+    model = talos.model
+    d = RobotSimu("rs", model)
+    assert isinstance(d, Device) and d.className == "RobotSimu"
+    with pytest.raises(EntityError, match=r"RobotSimu\(bare\): a simulated device needs"):
+        RobotSimu("bare")
+    d.resize(model.nv)  # SoT scripts size the device: the model's sizes are accepted
+    d.resize(model.nq)
+    with pytest.raises(CommandError, match=r"nq = 39, nv = 38\), got 12"):
+        d.resize(12)
+    np.testing.assert_array_equal(d.zmp.value, np.zeros(3))
+    d.zmp.value = (0.01, -0.02, 0.0)  # an input for a real robot's stabiliser
+    with pytest.raises(SotpyError, match="increment has not been called yet"):
+        d.getTimeStep()
+    d.setTimeStep(0.005)
+    assert d.getTimeStep() == 0.005
+    with pytest.raises(CommandError, match="dt must be a finite value > 0"):
+        d.setTimeStep(0.0)
+
+
+def test_device_set_takes_sots_roll_pitch_yaw_configuration(talos):
+    model = talos.model
+    d = Device("d", model)
+    rng = np.random.default_rng(6)
+    q_sot = np.r_[
+        rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3), rng.uniform(-0.2, 0.2, model.nv - 6)
+    ]
+    d.set(q_sot)  # size nv: x, y, z, roll, pitch, yaw, joints
+    q = d.state.value
+    assert q.shape == (model.nq,)
+    np.testing.assert_allclose(q[:3], q_sot[:3])
+    np.testing.assert_allclose(q[7:], q_sot[6:])
+    R = pin.Quaternion(q[3:7]).toRotationMatrix()  # (x, y, z, w)
+    Rz, Ry, Rx = (pin.utils.rotate(a, x) for a, x in zip("zyx", q_sot[5:2:-1], strict=True))
+    np.testing.assert_allclose(R, Rz @ Ry @ Rx, atol=1e-12)  # R = Rz(yaw) Ry(pitch) Rx(roll)
+    with pytest.raises(CommandError, match=r"nq = 39 \(or SoT's nv = 38, roll-pitch-yaw\)"):
+        d.set(np.zeros(10))

@@ -35,14 +35,18 @@ from sotpy.operators import (
     HomoToMatrix,
     Integrator,
     Inverse_of_matrixHomo,
+    JointLimitator,
     Latch,
+    MatrixConstant,
     MatrixHomoToPose,
     MatrixHomoToPoseUTheta,
     MatrixToHomo,
     Multiply_double_vector,
     Multiply_matrix_vector,
     Multiply_matrixHomo_vector,
+    Multiply_of_double,
     Multiply_of_matrixHomo,
+    OpPointModifier,
     PoseUThetaToMatrixHomo,
     Selec_of_vector,
     Stack_of_vector,
@@ -586,3 +590,96 @@ def test_a_plan_over_operators_gives_the_lazy_values():
         plan.run(t)
         np.testing.assert_allclose(add.sout.value, [2.0 + 10.0, 2.0 * t - 1.0 + 10.0])
     assert clock.calls == 5
+
+
+# -- OpPointModifier, JointLimitator, Multiply_of_double, MatrixConstant -----------------
+def _talos_dynamic():
+    from sotpy.dynamics import Dynamic, load_model
+
+    model = load_model("talos")[0]
+    dyn = Dynamic("dyn", model)
+    dyn.createOpPoint("rh", "arm_right_7_joint")
+    dyn.createJacobian("Jrh_world", "arm_right_7_joint", "local_world_aligned")
+    rng = np.random.default_rng(11)
+    q = pin.integrate(model, pin.neutral(model), rng.uniform(-0.4, 0.4, model.nv))
+    dyn.position.value = q
+    return model, dyn, q
+
+
+def test_op_point_modifier_position_and_jacobians_against_finite_differences():
+    model, dyn, q = _talos_dynamic()
+    aMb = random_se3()
+    m = OpPointModifier("m")
+    plug(dyn.signal("rh"), m.positionIN)
+    plug(dyn.signal("Jrh"), m.jacobianIN)
+    m.setTransformation(tuple(map(tuple, aMb.homogeneous)))  # SoT's tuple of rows
+    np.testing.assert_allclose(m.getTransformation(), aMb.homogeneous, atol=1e-15)
+    oMb = dyn.signal("rh").value * aMb
+    assert m.position.value.isApprox(oMb, 1e-12)
+    # LOCAL Jacobian of b: log6(oMb(q)^-1 oMb(q + eps v)) / eps = J v
+    v = np.random.default_rng(12).standard_normal(model.nv)
+    J = m.jacobian.value
+    eps = 1e-6
+    dyn.position.value = pin.integrate(model, q, eps * v)
+    fd = pin.log6(oMb.actInv(m.position.value)).vector / eps
+    np.testing.assert_allclose(J @ v, fd, atol=1e-4)
+    # world-aligned mode: the velocity of b's origin in world axes, and the angular one
+    dyn.position.value = q
+    m.setEndEffector(False)
+    assert not m.getEndEffector()
+    plug(dyn.signal("Jrh_world"), m.jacobianIN)
+    Jw = m.jacobian.value
+    dyn.position.value = pin.integrate(model, q, eps * v)
+    p1 = m.position.value.translation
+    dyn.position.value = pin.integrate(model, q, -eps * v)
+    p0 = m.position.value.translation
+    np.testing.assert_allclose(Jw[:3] @ v, (p1 - p0) / (2 * eps), atol=1e-5)
+    with pytest.raises(CommandError, match=r"OpPointModifier\(m\)\.setTransformation"):
+        m.setTransformation(np.diag([1.0, 2.0, 1.0, 1.0]))
+    np.testing.assert_allclose(m.getTransformation(), aMb.homogeneous, atol=1e-15)
+
+
+def test_joint_limitator_stops_a_joint_at_its_limit_one_period_ahead():
+    model, dyn, q = _talos_dynamic()
+    jl = JointLimitator("jl")
+    plug(dyn.position, jl.joint)  # an input following an input: its model is found
+    plug(dyn.upperJl, jl.upperJl)
+    plug(dyn.lowerJl, jl.lowerJl)
+    elbow = model.joints[model.getJointId("arm_right_4_joint")]
+    u = np.zeros(model.nv)
+    room = model.upperPositionLimit[elbow.idx_q] - q[elbow.idx_q]
+    u[elbow.idx_v] = 0.9 * room / 0.005  # stays inside in 5 ms: kept
+    u[:6] = 1.0  # the free flyer's components pass
+    jl.controlIN.value = u
+    np.testing.assert_array_equal(jl.control.value, u)
+    u[elbow.idx_v] = 1.1 * room / 0.005  # would cross: stopped
+    jl.controlIN.value = u
+    out = jl.control.value
+    assert out[elbow.idx_v] == 0.0 and out[:6].tolist() == [1.0] * 6
+    jl.dt.value = 0.001  # a shorter prediction keeps it
+    assert jl.control.value[elbow.idx_v] == u[elbow.idx_v]
+    np.testing.assert_allclose(
+        jl.widthJl.value, model.upperPositionLimit - model.lowerPositionLimit
+    )
+    bare = JointLimitator("bare")  # no model to find: q and the control must match
+    bare.joint.value = q
+    bare.upperJl.value = model.upperPositionLimit
+    bare.lowerJl.value = model.lowerPositionLimit
+    bare.controlIN.value = u
+    with pytest.raises(SignalTypeError, match=r"JointLimitator\(bare\)\.control.*model"):
+        _ = bare.control.value
+
+
+def test_multiply_of_double_and_matrix_constant():
+    p = Multiply_of_double("p")
+    p.setSignalNumber(3)
+    for i, x in enumerate((2.0, -1.5, 4.0)):
+        p.sin(i).value = x
+    assert p.sout.value == pytest.approx(-12.0)
+    c = MatrixConstant("c")
+    with pytest.raises(SotpyError, match=r"MatrixConstant\(c\)::output\(matrix\)::sout"):
+        _ = c.sout.value
+    c.resize(2, 3)
+    np.testing.assert_array_equal(c.sout.value, np.zeros((2, 3)))
+    c.set(((1.0, 2.0), (3.0, 4.0)))
+    np.testing.assert_array_equal(c.sout.value, [[1.0, 2.0], [3.0, 4.0]])

@@ -633,3 +633,53 @@ def test_cli_robots_prints_every_robot(capsys, summaries):
             assert f"{op}={frame}" in lines[name]
     assert "urdf:nao.urdf" in lines["nao"]
     assert "example-robot-data:talos" in lines["talos"]
+
+
+# -- SoT's humanoid robot class: attributes and tracer helpers ---------------------------
+def test_robot_has_the_humanoid_robot_class_attributes(tmp_path):
+    from sotpy.dynamics import load_robot
+
+    robot = load_robot("talos", prefix="h")
+    assert robot.dimension == robot.model.nv == 38
+    assert robot.OperationalPointsMap is robot.opPoints
+    assert robot.OperationalPointsMap["left-ankle"] == "leg_left_6_joint"
+    assert robot.OperationalPoints == tuple(robot.opPoints)
+    with pytest.raises(AttributeError):
+        robot.OperationalPoints.append("x")  # a tuple: not a silently lost list
+    assert robot.pinocchioModel is robot.model and robot.pinocchioData is robot.dynamic.data
+    robot.timeStep = 0.002
+    assert robot.timeStep == robot.device.getTimeStep() == 0.002
+    with pytest.raises(RobotError, match="dimension is nv = 38"):
+        robot.dimension = 39
+    assert list(robot.getActuatedJoints()) == list(range(6, 38))
+    q = robot.halfSitting.copy()
+    robot.setJointValueInConfig(q, ["arm_left_4_joint"], [-1.0])
+    assert q[robot.model.joints[robot.model.getJointId("arm_left_4_joint")].idx_q] == -1.0
+    with pytest.raises(RobotError, match="no joint named 'nope'"):
+        robot.setJointValueInConfig(q, ["nope"], [0.0])
+    robot.reset(q)
+    np.testing.assert_allclose(robot.device.state.value, q)
+    robot.initializeRobot()
+    np.testing.assert_allclose(robot.device.state.value, robot.halfSitting)
+    # the tracer: files named <entity>-<signal>, one row per increment, then forgotten
+    robot.addTrace("h_device", "state")  # no tracer yet: nothing (SoT's rule)
+    tr = robot.initializeTracer(str(tmp_path), "dg_", ".dat")
+    robot.addTrace("h_device", "state")
+    robot.addTrace("h_dynamic", "com")
+    robot.startTracer()
+    u = np.zeros(38)
+    u[6:18] = 0.01  # the legs move: the rows differ from tick to tick
+    robot.device.control.value = u
+    for _ in range(3):
+        robot.device.increment(0.002)
+    robot.stopTracer()
+    assert robot.tracer is None and tr.columns() == []
+    state = np.loadtxt(tmp_path / "dg_h_device-state.dat", ndmin=2)
+    com = np.loadtxt(tmp_path / "dg_h_dynamic-com.dat", ndmin=2)
+    np.testing.assert_array_equal(state[:, 0], [1, 2, 3])
+    np.testing.assert_allclose(state[-1, 1:], robot.device.state.value, atol=1e-15)
+    np.testing.assert_allclose(com[-1, 1:], robot.dynamic.com.value, atol=1e-15)
+    frame = robot.createFrame("tool", pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.1])), "right-wrist")
+    assert frame.position.value.isApprox(
+        robot.dynamic.signal("right-wrist").value * pin.SE3(np.eye(3), np.array([0, 0, 0.1]))
+    )

@@ -8,7 +8,7 @@ import pinocchio as pin
 import pytest
 
 from sotpy.dynamics import load_robot
-from sotpy.errors import EntityError, SignalTypeError, SotpyError, SotpyWarning
+from sotpy.errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
 from sotpy.graph import MATRIX, VECTOR, Entity, Input, Output, graphDot, plug
 from sotpy.solvers import solve_hierarchy
 from sotpy.solvers.sot import SOT
@@ -393,3 +393,63 @@ def test_joint_limit_level_is_never_damped(talos):
     qdot = sot.control.value
     assert qdot[iv] >= 0.001 / 0.01 - 1e-9  # back inside within one period
     assert sot.lastResult.feasible
+
+
+# -- SoT's construction: SOT(name), setSize, and the stack commands --------------------
+def test_sot_without_a_dynamic_takes_its_size_from_setsize_or_the_first_task():
+    rng = np.random.default_rng(3)
+    sot = SOT("sot")
+    with pytest.raises(
+        SotpyError, match=r"SOT\(sot\): the size of the control is not known.*setSize"
+    ):
+        sot.getSize()
+    J, e = rng.standard_normal((3, 7)), rng.standard_normal(3)
+    t = generic_task("t", J, e, 2.0)
+    sot.push(t)  # the size is the task's Jacobian's width
+    assert sot.getSize() == 7 and sot.list() == ["t"]
+    # SoT's SOT has no joint-limit level: the control is the least-norm solution
+    np.testing.assert_allclose(sot.control.value, np.linalg.pinv(J) @ (-2.0 * e), atol=1e-10)
+    with pytest.raises(CommandError, match="the tasks in the stack have 7 columns"):
+        sot.setSize(9)
+    sot.clear()
+    sot.setSize(9)
+    assert sot.getSize() == 9
+    with pytest.raises(SignalTypeError, match=r"has shape \(3, 7\), expected \(m, 9\)"):
+        sot.push(t)
+    other = SOT("other")
+    other.setSize(7)
+    other.push(t)
+    assert other.getSize() == 7
+    with pytest.raises(CommandError, match="expected a size > 0"):
+        SOT("third").setSize(0)
+
+
+def test_set_size_on_a_sot_built_on_a_dynamic_accepts_only_the_models_nv(talos):
+    sot = SOT("sot", talos.dynamic)
+    sot.setSize(talos.model.nv)  # SoT scripts call it: accepted
+    with pytest.raises(CommandError, match=r"the size is nv = 38, the model's"):
+        sot.setSize(39)
+    assert sot.getSize() == 38
+
+
+def test_rm_pop_and_dispstack(talos):
+    rng = np.random.default_rng(4)
+    nv = talos.model.nv
+    sot = SOT("sot", talos.dynamic)
+    tasks = [
+        generic_task(f"t{i}", rng.standard_normal((2, nv)), rng.standard_normal(2))
+        for i in range(3)
+    ]
+    for t in tasks:
+        sot.push(t.name)
+    text = sot.dispStack()
+    # the format sot-dyninv scripts parse: split on '|', strip one character each side
+    assert [x[1:-1] for x in text.split("|")[1:]] == ["t0", "t1", "t2"]
+    assert sot.pop() == "t2" and sot.list() == ["t0", "t1"]
+    sot.rm("t0")
+    assert sot.list() == ["t1"]
+    with pytest.raises(SotpyError, match="t0 is not in the stack"):
+        sot.rm("t0")
+    sot.pop()
+    with pytest.raises(SotpyError, match=r"SOT\(sot\)\.pop: the stack is empty"):
+        sot.pop()

@@ -11,10 +11,13 @@ import pytest
 from sotpy.dynamics import Dynamic, load_model, load_robot
 from sotpy.errors import CommandError, EntityError, SignalTypeError, SotpyError, UnpluggedError
 from sotpy.graph import VECTOR, Entity, Output, Plan, plug, pool
+from sotpy.solvers import SOT
 from sotpy.tasks import (
     FeatureGeneric,
+    FeaturePoint6d,
     FeaturePose,
     FeaturePosture,
+    Flags,
     GainAdaptive,
     MetaTaskKine6d,
     MetaTaskKineCom,
@@ -22,6 +25,10 @@ from sotpy.tasks import (
     Task,
     TaskAbstract,
     TaskInequality,
+    TaskJointLimits,
+    goto6d,
+    gotoNd,
+    toFlags,
 )
 
 EPS = 1e-6
@@ -444,3 +451,144 @@ def test_meta_task_kine_posture():
     assert isinstance(p3.feature, FeaturePosture)
     with pytest.raises(EntityError, match=r"Dynamic or a pinocchio\.Model"):
         MetaTaskKinePosture("talos", name="p4")
+
+
+# -- SoT's API: opmodif, gotoNd as a function, toFlags, FeaturePoint6d, TaskJointLimits
+def test_meta_task_kine6d_opmodif_controls_a_point_attached_to_the_op_point(talos):
+    model, dyn, q = talos
+    rh = MetaTaskKine6d("rh", dyn, "right-wrist")
+    assert rh.opmodif is False
+    aMb = pin.SE3(pin.exp3(np.array([0.0, 0.3, 0.0])), np.array([0.1, 0.0, -0.02]))
+    rh.opmodif = aMb.homogeneous  # SoT writes a 4 x 4 matrix (or matrixToTuple's rows)
+    np.testing.assert_allclose(rh.opmodif, aMb.homogeneous, atol=1e-15)
+    assert rh.feature.position.source is rh.opPointModif.position
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    oMb = data.oMf[model.getFrameId("arm_right_7_joint")] * aMb
+    assert rh.feature.position.value.isApprox(oMb, 1e-12)
+    # the controlled point's Jacobian: the error's rate along a random velocity
+    rh.gotoNd(oMb.translation + np.array([0.05, 0.0, 0.0]), "111000")
+    v = np.random.default_rng(5).standard_normal(model.nv)
+    e0 = rh.task.error.value.copy()
+    J = rh.task.jacobian.value
+    dyn.position.value = pin.integrate(model, q, EPS * v)
+    np.testing.assert_allclose((rh.task.error.value - e0) / EPS, J @ v, atol=1e-4)
+    dyn.position.value = q
+    rh.opmodif = False  # back to the op point itself
+    assert rh.opmodif is False and rh.feature.position.source is dyn.signal("right-wrist")
+    with pytest.raises(CommandError, match=r"MetaTaskKine6d\('rh'\)\.opmodif.*rotation"):
+        rh.opmodif = np.diag([2.0, 1.0, 1.0, 1.0])
+    with pytest.raises(CommandError, match="True is not a placement"):
+        rh.opmodif = True
+    assert rh.opmodif is False  # left unchanged
+
+
+def test_meta_tasks_refuse_attributes_they_do_not_have(talos):
+    _, dyn, _ = talos
+    com = MetaTaskKineCom(dyn)
+    with pytest.raises(
+        AttributeError, match=r"MetaTaskKineCom\('com'\) has no attribute 'opmodif'"
+    ):
+        com.opmodif = np.eye(4)  # a SoT 6-D task's attribute: never silently stored
+    com.ref = [0.0, 0.0, 0.8]  # its own attributes are fine
+    np.testing.assert_array_equal(com.featureDes.errorIN.value, [0.0, 0.0, 0.8])
+
+
+def test_goto_nd_function_to_flags_and_goto6d(talos):
+    _, dyn, _ = talos
+    rh = MetaTaskKine6d("rh", dyn, "right-wrist")
+    rh.keep()
+    M = rh.ref
+    gotoNd(rh, M.translation + np.array([0.0, 0.0, 0.1]), "111", 2.0)
+    assert rh.feature.selec.value == Flags("111")
+    np.testing.assert_allclose(rh.ref.translation, M.translation + np.array([0.0, 0.0, 0.1]))
+    np.testing.assert_allclose(rh.ref.rotation, M.rotation)  # sotpy's: orientation kept
+    assert rh.task.controlGain.value == pytest.approx(2.0)
+    goto6d(rh, M)
+    assert rh.feature.selec.value == Flags("111111") and rh.ref.isApprox(M)
+    with pytest.raises(CommandError, match="not a meta-task with a target"):
+        gotoNd(rh.task, M)
+    assert toFlags("0011") == Flags("0011")
+    assert toFlags([True, False, True]) == Flags("101")
+    assert toFlags(range(6, 9)) == Flags("000000111")  # row indices (old SoT scripts)
+    assert toFlags([0, 1]) == Flags("01") and toFlags([3]) == Flags("0001")
+
+
+def test_feature_point6d_with_a_reference_feature(talos):
+    _, dyn, _ = talos
+    f = FeaturePoint6d("f")
+    des = FeaturePoint6d("f_ref")
+    plug(dyn.signal("right-wrist"), f.position)
+    plug(dyn.signal("Jright-wrist"), f.Jq)
+    f.setReference(des)
+    assert f.getReference() == "f_ref"
+    with pytest.raises(UnpluggedError, match=r"FeaturePoint6d\(f_ref\)::input\(SE3\)::position"):
+        _ = f.error.value
+    M = dyn.signal("right-wrist").value
+    target = M * pin.SE3(np.eye(3), np.array([0.0, 0.1, 0.0]))
+    des.position.value = target.homogeneous  # SoT's: the desired placement in featureDes
+    np.testing.assert_allclose(f.error.value, [0.0, -0.1, 0.0, 0.0, 0.0, 0.0], atol=1e-12)
+    f.keep()  # writes the current placement into featureDes.position
+    assert des.position.value.isApprox(M, 1e-12)
+    np.testing.assert_allclose(f.error.value, np.zeros(6), atol=1e-12)
+    f.unsetReference()
+    assert f.reference.source is None
+
+
+def test_task_joint_limits_bounds_and_rows():
+    robot = load_robot("talos", prefix="tjl")
+    model = robot.model
+    t = TaskJointLimits("tjl")
+    plug(robot.dynamic.position, t.position)
+    plug(robot.dynamic.lowerJl, t.referenceInf)
+    plug(robot.dynamic.upperJl, t.referenceSup)
+    t.dt.value = 0.005
+    t.controlGain.value = 4.0
+    t.selec.value = toFlags(range(6, 12))  # the left leg's six DoFs
+    q = robot.device.state.value
+    J, lo, up = t.jacobian.value, t.lower.value, t.upper.value
+    assert J.shape == (6, model.nv) and t.activeSize.value == 6
+    for r, i in enumerate(range(6, 12)):
+        joint = model.joints[next(j for j in range(1, model.njoints) if model.joints[j].idx_v == i)]
+        k = joint.idx_q
+        expected = [0.0] * model.nv
+        expected[i] = 1.0
+        np.testing.assert_array_equal(J[r], expected)
+        lq, uq = model.lowerPositionLimit[k], model.upperPositionLimit[k]
+        assert lo[r] == pytest.approx((lq - q[k]) / (0.005 * 4.0))
+        assert up[r] == pytest.approx((uq - q[k]) / (0.005 * 4.0))
+        assert t.normalizedPosition.value[r] == pytest.approx((q[k] - lq) / (uq - lq))
+    with pytest.raises(CommandError, match="has no feature"):
+        t.add(FeatureGeneric("g"))
+    t.selec.value = "1"  # a free flyer's DoF: no joint limit
+    with pytest.raises(SignalTypeError, match="DoF 0 is not a one-DoF joint"):
+        _ = t.jacobian.value
+
+
+def test_task_joint_limits_keep_a_driven_joint_inside_its_range():
+    """A task pushing a joint past its limit, below TaskJointLimits: the joint stops at
+    the limit (within one period's rounding) instead of going through."""
+    robot = load_robot("talos", prefix="tjl")
+    model = robot.model
+    sot = SOT("sot")
+    sot.setSize(model.nv)
+    plug(sot.control, robot.device.control)
+    t = TaskJointLimits("tjl")
+    plug(robot.dynamic.position, t.position)
+    plug(robot.dynamic.lowerJl, t.referenceInf)
+    plug(robot.dynamic.upperJl, t.referenceSup)
+    t.dt.value = 0.01
+    elbow = model.joints[model.getJointId("arm_right_4_joint")]
+    posture = MetaTaskKinePosture(robot.dynamic, robot.device)
+    q = robot.halfSitting.copy()
+    q[elbow.idx_q] = model.upperPositionLimit[elbow.idx_q] + 0.5  # beyond the limit
+    posture.feature.posture.value = q
+    posture.gain.setConstant(2.0)  # 1/s: within the elbow's velocity limit
+    sot.push(t)
+    sot.push(posture.task)
+    for _ in range(200):
+        robot.device.increment(0.01)
+    qe = robot.device.state.value[elbow.idx_q]
+    assert qe == pytest.approx(model.upperPositionLimit[elbow.idx_q], abs=1e-6)
+    report = robot.device.boundsReport()
+    assert report["position"]["count"] == 0  # the device never had to clamp

@@ -289,3 +289,44 @@ def test_dump_refuses_unknown_formats(tmp_path):
     tr.trigger(0)
     with pytest.raises(SotpyError, match=r"\.txt"):
         tr.dump(str(tmp_path / "run.txt"))
+
+
+# -- SoT's files: open, dump(), close -------------------------------------------------
+def test_open_dump_close_write_sots_text_files(tmp_path):
+    tr, _ = _tracer()
+    d = tmp_path / "traces"  # created by open
+    tr.open(str(d), "dg_", ".dat")
+    files = [d / "dg_vec.dat", d / "dg_h.dat"]  # the label given to add, else the short name
+    assert tr.files() == [str(f) for f in files] and all(f.read_text() == "" for f in files)
+    tr.start()
+    for t in range(3):
+        tr.triger(t)  # SoT's spelling: the same row
+        tr.trigger(t)
+    assert tr.dump() == str(d)  # appends the rows and forgets them
+    assert tr.data()["time"].shape == (0,)
+    for t in range(3, 5):
+        tr.trigger(t)
+    tr.close()  # the rows left, then the files are closed
+    assert tr.files() == []
+    vec = np.loadtxt(files[0], delimiter="\t", ndmin=2)
+    h = np.loadtxt(files[1], delimiter="\t", ndmin=2)
+    np.testing.assert_array_equal(vec[:, 0], np.arange(5))  # the tick first
+    np.testing.assert_array_equal(vec[:, 1:], [vec_ref(t) for t in range(5)])
+    np.testing.assert_array_equal(h[:, 1], [0.5 * t for t in range(5)])
+    assert files[0].read_text().splitlines()[1].split("\t")[0] == "1"
+    with pytest.raises(SotpyError, match=r"Tracer\(tr\)\.dump: no file is open.*open"):
+        tr.dump()
+    tr.close()  # closing again does nothing
+
+
+def test_a_signal_added_after_open_gets_its_file_and_clear_closes(tmp_path):
+    tr, c = _tracer()
+    tr.open(str(tmp_path), "p_", ".txt")
+    tr.add(c.mat, "m")
+    assert tr.files()[-1] == str(tmp_path / "p_m.txt") and (tmp_path / "p_m.txt").exists()
+    tr.start()
+    tr.trigger(7)
+    tr.dump()
+    assert np.loadtxt(tmp_path / "p_m.txt", delimiter="\t").tolist() == [7, 7, 1, 2, -7]
+    tr.clear()  # SoT's: the signals go, the files are closed
+    assert tr.columns() == [] and tr.files() == []
