@@ -1,8 +1,13 @@
 """The inverted-pendulum tutorial: physics against independent derivations, the SoT
 display and help strings, bad input, the closed loop, and the ``sotpy`` CLI."""
 
+import contextlib
+import io
+import re
+import shlex
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -533,3 +538,60 @@ def test_python_dash_m_sotpy():
     )
     assert r.returncode == 0, r.stderr
     assert "pendulum" in r.stdout
+
+
+# -- the tutorial page's recorded output is true ---------------------------------------
+_DOC = Path(__file__).resolve().parents[1] / "docs" / "tutorial-pendulum.md"
+_FENCE = re.compile(r"^```([a-z]*)[ \t]*\n(.*?)^```[ \t]*$", re.S | re.M)
+_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?[,\]\)]*$")
+
+
+def _same_text(got: str, recorded: str, where: str) -> None:
+    """Line by line; numbers equal to 6 significant digits (printing may round the last
+    one differently across platforms), the wall time of a run ignored."""
+    g, r = got.strip("\n").splitlines(), recorded.strip("\n").splitlines()
+    assert len(g) == len(r), f"{where}: printed\n{got}\nrecorded\n{recorded}"
+    for a, b in zip(g, r, strict=True):
+        if "ticks in" in b:  # '... 205 ticks in 0.01 s': the time varies
+            a, b = a.rsplit(" in ", 1)[0], b.rsplit(" in ", 1)[0]
+        ta, tb = a.replace("[", " [ ").split(), b.replace("[", " [ ").split()
+        assert len(ta) == len(tb), f"{where}: printed {a!r}, recorded {b!r}"
+        for x, y in zip(ta, tb, strict=True):
+            if _NUMBER.match(x) and _NUMBER.match(y):
+                fx, fy = float(x.rstrip(",])")), float(y.rstrip(",])"))
+                assert fx == pytest.approx(fy, rel=1e-5, abs=1e-12), f"{where}: {a!r} vs {b!r}"
+            else:
+                assert x == y, f"{where}: printed {a!r}, recorded {b!r}"
+
+
+def test_tutorial_page_output_is_what_the_code_prints(tmp_path, monkeypatch):
+    """Every Python block of docs/tutorial-pendulum.md runs, in order, and prints what
+    the block after it records; the console run of the failing pendulum too."""
+    monkeypatch.chdir(tmp_path)  # the plot lands here
+    blocks = _FENCE.findall(_DOC.read_text())
+    namespace: dict = {"__name__": "__main__"}
+    checked = 0
+    for i, (lang, body) in enumerate(blocks):
+        where = f"docs/tutorial-pendulum.md, block {i + 1}"
+        if lang == "python":
+            out = io.StringIO()
+            with contextlib.redirect_stdout(out):
+                exec(compile(body, where, "exec"), namespace)
+            assert blocks[i + 1][0] == "", f"{where}: no recorded output after it"
+            _same_text(out.getvalue(), blocks[i + 1][1], where)
+            checked += 1
+        elif (
+            lang == "console"
+            and "\n" in body.strip()
+            and not body.startswith("$ sotpy demo pendulum --plot")
+        ):
+            lines = body.strip("\n").splitlines()
+            args = shlex.split(lines[0][2:])[1:]
+            end = lines.index("$ echo $?")
+            out = io.StringIO()
+            with contextlib.redirect_stdout(out):
+                code = main(args)
+            _same_text(out.getvalue(), "\n".join(lines[1:end]), where)
+            assert str(code) == lines[end + 1]
+            checked += 1
+    assert checked >= 9

@@ -6,7 +6,7 @@ sot-core, sot-dynamic-pinocchio, sot-talos, sot-tools, the dynamic-graph tutoria
 served from sotpy by an import hook (:mod:`sotpy.compat._hook`) installed for the run
 only: a plain ``import sotpy`` never installs it, so a real SoT installed beside sotpy
 keeps its own ``dynamic_graph`` everywhere else. The modules are in
-:mod:`sotpy.compat.dynamic_graph` and in the table :mod:`sotpy.compat._table`; their
+``sotpy.compat.dynamic_graph`` and in the table ``sotpy.compat._table``; their
 names and what each maps to are in ``docs/porting.md``.
 
 What sotpy does not provide raises :class:`UnsupportedFeature` (or
@@ -47,7 +47,7 @@ __all__ = [
 
 
 def install() -> None:
-    """Serve ``dynamic_graph`` from sotpy from now on (a :class:`SoTFinder` first in
+    """Serve ``dynamic_graph`` from sotpy from now on (a ``SoTFinder`` first in
     ``sys.meta_path``). A ``dynamic_graph`` module already imported (a real SoT's) is
     set aside until :func:`uninstall`."""
     if installed():

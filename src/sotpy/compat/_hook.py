@@ -1,13 +1,13 @@
 """The import hook of ``sotpy run``: serves ``dynamic_graph`` and its submodules from
-:mod:`sotpy.compat.dynamic_graph`.
+``sotpy.compat.dynamic_graph``.
 
-:class:`SoTFinder`, once in ``sys.meta_path`` (first), answers every import of
+``SoTFinder``, once in ``sys.meta_path`` (first), answers every import of
 ``dynamic_graph`` or ``dynamic_graph.<...>``:
 
 - a module sotpy serves is imported as ``sotpy.compat.<name>`` and the same module
   object is registered under ``<name>`` too, so ``dynamic_graph.sot.core.sot.SOT`` is
   ``sotpy.solvers.SOT`` and each module exists once;
-- a module of :data:`sotpy.compat._table.MODULES` (one of the many sot-core modules
+- a module of ``sotpy.compat._table.MODULES`` (one of the many sot-core modules
   that only hold entity classes) is built from that table: a module whose attributes
   are sotpy's classes;
 - a SoT module sotpy knows it does not serve (``dynamic_graph.ros``, ...) raises
@@ -152,5 +152,5 @@ def _servedModules() -> list[str]:
 
 
 def installed() -> bool:
-    """Whether a :class:`SoTFinder` is in ``sys.meta_path``."""
+    """Whether a ``SoTFinder`` is in ``sys.meta_path``."""
     return any(isinstance(f, SoTFinder) for f in sys.meta_path)
