@@ -537,7 +537,7 @@ def test_set_checks_normalises_and_invalidates(talos):
     plug(dev.state, reader.sin)
     before = snapshot(dev)
     with pytest.raises(CommandError, match=rf"Device\(dev\)\.set.*nq = {model.nq}"):
-        dev.set(np.zeros(model.nq - 1))
+        dev.set(np.zeros(model.nq - 2))  # (nq - 1 = nv is SoT's roll-pitch-yaw size)
     zero_quat = talos.q0.copy()
     zero_quat[3:7] = 0.0
     with pytest.raises(CommandError, match="quaternion"):
