@@ -434,3 +434,25 @@ def test_dynamic_pinocchio_and_the_older_humanoid_robot(hook):
     np.testing.assert_allclose(robot.device.state.value, q, atol=1e-12)
     assert robot.dynamic.hasSignal("left-wrist") and robot.OperationalPoints == ["left-wrist"]
     assert robot.timeStep == 0.005
+
+
+def test_the_sot_script_of_the_porting_page_runs(tmp_path, capsys):
+    """docs/porting.md's SoT script, as printed there, under ``sotpy run``: the grip
+    point reaches its target."""
+    import ast
+    import re
+    import warnings
+
+    from sotpy.errors import SotpyWarning
+
+    page = (ROOT / "docs" / "porting.md").read_text()
+    script = re.findall(r"```python\n(.*?)```", page, re.S)[0]
+    assert script.startswith("from numpy import eye\n\nfrom dynamic_graph import plug")
+    check = "\nprint([float(x) for x in taskRH.opPointModif.position.value.translation])\n"
+    path = tmp_path / "appli.py"
+    path.write_text(script + check)
+    with warnings.catch_warnings():  # Talos' grippers rest on their limit: reported
+        warnings.simplefilter("ignore", SotpyWarning)
+        assert main(["run", str(path)]) == 0
+    grip = np.array(ast.literal_eval(capsys.readouterr().out.strip().splitlines()[-1]))
+    np.testing.assert_allclose(grip, [0.45, -0.3, 0.95], atol=1e-4)
