@@ -456,3 +456,17 @@ def test_the_sot_script_of_the_porting_page_runs(tmp_path, capsys):
         assert main(["run", str(path)]) == 0
     grip = np.array(ast.literal_eval(capsys.readouterr().out.strip().splitlines()[-1]))
     np.testing.assert_allclose(grip, [0.45, -0.3, 0.95], atol=1e-4)
+
+
+def test_dynamic_graph_tools_add_trace(hook):
+    from dynamic_graph.sot.pyrene.robot import Robot
+    from dynamic_graph.tools import addTrace
+    from dynamic_graph.tracer import Tracer
+
+    robot = Robot("talos")
+    tr = Tracer("tr")
+    addTrace(robot, tr, "talos_dynamic", "com")
+    assert tr.columns() == ["talos_dynamic-com"]  # the file name <entity>-<signal>
+    assert "talos_dynamic.com" in robot.device.after.list()[-1]
+    addTrace(robot, tr, "talos_device", "state", autoRecompute=False)
+    assert tr.columns()[-1] == "talos_device-state" and len(robot.device.after.list()) == 1

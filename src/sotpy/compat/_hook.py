@@ -52,6 +52,11 @@ NOT_SERVED: dict[str, str] = {
     "dynamic_graph.sot.core.feature_point6d_relative": "a FeaturePose on a relative "
     "placement (Inverse_of_matrixHomo, Multiply_of_matrixHomo)",
     "dynamic_graph.sot.core.task_pd": "Task with setWithDerivative(True)",
+    "dynamic_graph.sot.core.task_unilateral": "TaskInequality (bounds on the error, any "
+    "priority level)",
+    "dynamic_graph.sot.core.feature_pose": "sot-core's relative FeaturePose (oMja, oMjb, "
+    "...) is not ported: FeaturePoint6d, or sotpy's FeaturePose on a placement composed "
+    "with Inverse_of_matrixHomo and Multiply_of_matrixHomo",
     "dynamic_graph.sot.core.task_conti": "Task (sotpy inserts a task without smoothing)",
     "dynamic_graph.sot.core.feature_line_distance": "FeatureGeneric with your own "
     "error and Jacobian",
