@@ -14,6 +14,7 @@
     sotpy robots
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
     sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
+                [--zenoh PATH]
     sotpy connect [--connection-file PATH]
     sotpy run SCRIPT.py [ARG ...]
 
@@ -273,6 +274,15 @@ def _serve_run(args: argparse.Namespace) -> int:
     except SotpyError as exc:
         print(f"sotpy serve: {exc}", file=sys.stderr)
         return 1
+    bridge = None
+    if args.zenoh:  # publish and subscribe signals over Zenoh (sotpy.bridge.serve)
+        from .bridge.serve import ServeBridge, loadServeConfig
+
+        try:
+            bridge = ServeBridge(loadServeConfig(args.zenoh), ns["robot"].device)
+        except SotpyError as exc:
+            print(f"sotpy serve: {exc}", file=sys.stderr)
+            return 1
     path = args.connection_file or defaultConnectionFile()
     try:
         server = RemoteServer(ns, host=args.host, port=args.port, connectionFile=path)
@@ -290,6 +300,8 @@ def _serve_run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     try:
         server.start()  # writes the connection file
+        if bridge is not None:
+            bridge.ready(lambda text: print(text, flush=True))
         if not args.paused:
             loop.start()
         host, port = server.address
@@ -324,6 +336,9 @@ def add_serve(subparsers: Any) -> None:
     p.add_argument("--port", type=int, default=0, help="TCP port (0: a free one)")
     p.add_argument("--connection-file", metavar="PATH", help="where to write address+token")
     p.add_argument("--paused", action="store_true", help="do not start the loop")
+    p.add_argument(
+        "--zenoh", metavar="PATH", help="publish/subscribe signals over Zenoh (docs/zenoh.md)"
+    )
     p.set_defaults(func=_serve_run)
 
 

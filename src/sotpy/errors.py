@@ -92,5 +92,22 @@ class RobotDescriptionError(RobotError):
     """
 
 
+class BridgeError(SotpyError):
+    """Publishing or subscribing signals across processes failed (:mod:`sotpy.bridge`):
+    the middleware is missing or refused a configuration, or a key is misdeclared."""
+
+
+class StaleSignalError(BridgeError):
+    """A subscribed signal was read with no sample, or with a sample older than its age
+    limit (``ZenohSubscribe.setMaxAge``), or a lock-step wait timed out. Raised by the
+    signal's computation, so a control loop stops the device safely; ``key`` names the
+    key expression, ``age`` the age in s (``inf`` before the first sample)."""
+
+    def __init__(self, message: str, key: str, age: float):
+        super().__init__(message)
+        self.key = key
+        self.age = age
+
+
 class SotpyWarning(UserWarning):
     """Warnings emitted by sotpy (e.g. a tracer buffer that filled up)."""
