@@ -137,11 +137,11 @@ def expectedShape(typeName: str, size: Any) -> tuple[int, ...] | None:
 
 
 def _has_nan(a: np.ndarray) -> bool:
-    """Whether ``a`` has a NaN entry: its sum of squares is NaN exactly then (an infinite
-    or huge entry makes it inf, never NaN); one BLAS call, 4 times faster here than
-    ``np.isnan(a).any()`` on a 38-vector."""
+    """Whether ``a`` has a NaN entry: its minimum is NaN exactly then (NumPy's ``min``
+    propagates NaN); faster here than ``np.isnan(a).any()`` on a 38-vector (1.5 against
+    2.3 us)."""
     r = a.reshape(-1)
-    return math.isnan(float(r @ r))
+    return bool(r.size) and math.isnan(r.min())
 
 
 def _fail(message: str, reason: str) -> SampleError:

@@ -73,6 +73,7 @@ to values (``{"mode": "peer", "connect/endpoints": ["tcp/192.168.1.10:7447"]}``)
 from __future__ import annotations
 
 import atexit
+import contextlib
 import json
 import logging
 import math
@@ -324,10 +325,8 @@ class _PubKey:
         self.shm: Any = None
 
     def undeclare(self) -> None:
-        try:
+        with contextlib.suppress(Exception):  # the session may be closed already
             self.pub.undeclare()
-        except Exception:  # pragma: no cover - the session may be closed already
-            pass
 
 
 class ZenohPublish(_BridgeEntity):
@@ -515,10 +514,8 @@ class _SubKey:
         self.warned: set[str] = set()
 
     def undeclare(self) -> None:
-        try:
+        with contextlib.suppress(Exception):  # the session may be closed already
             self.sub.undeclare()
-        except Exception:  # pragma: no cover - the session may be closed already
-            pass
 
     def age(self, now_ns: int | None = None) -> float:
         if self.first:
