@@ -106,7 +106,10 @@ log = logging.getLogger("sotpy.bridge")
 EXTRA = "pip install 'sotpy[zenoh]'"
 #: Samples kept per subscribed key between two reads (the oldest are dropped beyond).
 RING = 64
-_SPIN_NS = 1_000_000  # a lock-step wait yields (sleep(0)) this long, then sleeps 50 us steps
+# A lock-step wait polls between sleeps of this many s (a sleep lasts 60-110 us on Linux
+# with its default timer slack): a spin with sleep(0) took a core from the processes it
+# waits for on a 2-core machine (bench_zenoh: trigger p50 54 us spinning)
+_WAIT_SLEEP = 10e-6
 
 # SoT's type names (RosSubscribe's 'matrixHomo', 'unsigned') and sotpy's
 _TYPE_ALIASES = {"matrixHomo": "SE3", "unsigned": "int"}
@@ -746,10 +749,7 @@ class ZenohSubscribe(_BridgeEntity):
                     k.key,
                     k.age(now),
                 )
-            if now - start < _SPIN_NS:
-                time.sleep(0)
-            else:
-                time.sleep(50e-6)
+            time.sleep(_WAIT_SLEEP)
 
     def _refuse(self, k: _SubKey, exc: SampleError) -> None:
         k.refused[exc.reason] = k.refused.get(exc.reason, 0) + 1
