@@ -3,7 +3,7 @@ in another, exchanging the state and the control over Zenoh.
 
 The device process is ``sotpy serve talos --zenoh device.toml`` (this script writes the
 file and starts it): its loop runs at 1 kHz, publishes ``talos_device.state`` and
-``talos_device.velocity`` at each tick (``device.before``) and takes its control from
+``talos_device.velocity`` after each tick (``device.after``) and takes its control from
 the key ``sotpy/talos/control``, waiting at each tick for the control of that tick
 (lock-step, at most 1 s: then the loop stops the robot safely).
 

@@ -1,6 +1,7 @@
 """Signals across processes and machines: SoT's ROS bridge entities over Eclipse Zenoh.
 
-:class:`ZenohPublish` and :class:`ZenohSubscribe` (``add(type, signalName, key)``,
+:class:`~sotpy.bridge.entities.ZenohPublish` and
+:class:`~sotpy.bridge.entities.ZenohSubscribe` (``add(type, signalName, key)``,
 ``rm``, ``list``, ``clear``, as ``RosPublish`` and ``RosSubscribe``) carry signal values
 in the versioned binary encoding of :mod:`sotpy.bridge.encoding`; a subscribed signal
 reports its age and stops a control loop safely when it is older than its limit. The

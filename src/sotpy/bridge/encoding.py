@@ -1,6 +1,6 @@
 r"""The binary encoding of signal values on the wire (version 1), and a ROS 2 CDR codec.
 
-Every sample that :class:`~sotpy.bridge.ZenohPublish` sends is one value of one
+Every sample that :class:`~sotpy.bridge.entities.ZenohPublish` sends is one value of one
 signal type, as bytes, little-endian, with no pickle and nothing executable in it::
 
     offset  size  field
@@ -99,7 +99,7 @@ TYPE_CODES: dict[str, int] = {
 _NAMES = {c: n for n, c in TYPE_CODES.items()}
 #: Default size limit of a sample, in bytes (1 MiB: a 131,000-entry vector).
 MAX_SAMPLE_BYTES = 1 << 20
-#: Largest entry of |R^T R - I| and |det R - 1| accepted in an SE3 sample.
+#: Largest entry of ``|R^T R - I|`` and of ``|det R - 1|`` accepted in an SE3 sample.
 ROTATION_TOLERANCE = 1e-9
 
 _H = HEADER.size  # 24

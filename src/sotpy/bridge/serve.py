@@ -13,8 +13,8 @@ The file is TOML::
     signal = "talos_device.state"      # entity.signal
     key = "sotpy/talos/state"
     period = 1                         # every k-th tick (default 1)
-    call = "before"                    # device.before (default: the state at t, before
-                                       # the control at t is read) or "after"
+    call = "after"                     # device.after (default: the state just written,
+                                       # as SoT's RosPublish) or "before"
 
     [[subscribe]]                      # a key -> an input of the served graph
     signal = "talos_device.control"
@@ -82,7 +82,7 @@ def loadServeConfig(path: str | Path) -> dict[str, Any]:
             for need in ("signal", "key"):
                 if not isinstance(e.get(need), str):
                     raise BridgeError(f"{where}: {need} (a string) is missing")
-            if e.get("call", "before") not in ("before", "after"):
+            if e.get("call", "after") not in ("before", "after"):
                 raise BridgeError(f"{where}: call is 'before' or 'after', got {e['call']!r}")
     session = cfg.get("session")
     if session is not None and not isinstance(session, dict):
@@ -116,7 +116,7 @@ class ServeBridge:
                     name = f"p{i}_{src.shortName}".replace("-", "_")
                     self.pub.add(src.type.name, name, e["key"])
                     plug(src, self.pub.signal(name))
-                    calls[(e.get("call", "before"), int(e.get("period", 1)))] = None
+                    calls[(e.get("call", "after"), int(e.get("period", 1)))] = None
                 if len(calls) > 1:
                     raise BridgeError(
                         f"{cfg['path']}: every [[publish]] entry must have the same call and "
