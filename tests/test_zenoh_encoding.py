@@ -138,9 +138,7 @@ def test_declared_shapes():
 
 
 def test_joint_state_cdr_matches_the_layout_written_by_hand():
-    data = encodeJointState(
-        ["a", "bc"], [1.0, 2.0], [], [0.5, -0.5], stamp=1.25, frameId=""
-    )
+    data = encodeJointState(["a", "bc"], [1.0, 2.0], [], [0.5, -0.5], stamp=1.25, frameId="")
     # OMG CDR little-endian, alignment counted after the 4-byte encapsulation header
     expected = (
         b"\x00\x01\x00\x00"  # encapsulation: CDR_LE
