@@ -5,17 +5,19 @@
   waits for it (``ZenohSubscribe`` in lock-step), publishes a 38-vector state of tick
   ``k``, and the controller waits for that state: the time from before the control's
   ``trigger`` to the state's arrival in the controller's graph. 10^4 ticks paced at
-  1 kHz, over TCP on loopback, then with both publishers in Zenoh's shared memory.
-  Reported: p50, p99 and worst, in us.
+  1 kHz, over TCP on loopback, then with both publishers in Zenoh's shared memory; each
+  with the samples put by the publishers' send threads (the default), then on the
+  ticks' threads (``setSendThread(False)``). Reported: p50, p99 and worst, in us.
 * **Publisher cost**: a Talos reach tick (``device.increment`` of the stack of ``sotpy
   demo talos``) paced at 1 kHz, followed in each tick by the ``trigger`` of a
   ``ZenohPublish`` in the device's ``after`` list, sending the state just written to a
-  subscriber in another process: the device's velocity (a 38-vector), then its state
-  (39) and velocity (38), as the device process of ``examples/zenoh_reach.py`` does.
-  The trigger's time as a ratio to the tick's, median over median and p99 over p99,
-  both measured in the same ticks, by the wall clock and by the thread's CPU clock
-  (which leaves out the time other processes ran instead). The round trip's ``trigger``
-  times are larger: each follows a wait, and runs on cold caches.
+  subscriber in another process: the device's velocity (a 38-vector) with and without
+  the send thread, then its state (39) and velocity (38), as the device process of
+  ``examples/zenoh_reach.py`` does. The trigger's time as a ratio to the tick's, median
+  over median and p99 over p99, both measured in the same ticks, by the wall clock and
+  by the thread's CPU clock (which leaves out the time other processes ran instead).
+  The round trip's ``trigger`` times are larger: each follows a wait, and runs on cold
+  caches.
 
 Usage::
 
@@ -43,7 +45,8 @@ N = 38  # Talos' nv: the size of the state and of the control
 _SIZES = {"state": 39, "velocity": 38}
 # the publishers whose cost is measured: a 38-vector, and the device process of
 # examples/zenoh_reach.py (its state and its velocity)
-_COST_KEYS = (("velocity",), ("state", "velocity"))
+_COST_KEYS = ((("velocity",), True), (("velocity",), False), (("state", "velocity"), True))
+_MODE = {True: "send thread", False: "tick's thread"}
 
 
 def free_port() -> int:
@@ -52,7 +55,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def device(port: int, ticks: int, shm: bool) -> int:
+def device(port: int, ticks: int, shm: bool, thread: bool) -> int:
     """The device side: at each tick, wait for the control of the tick, send a state."""
     config = loopbackConfig(connect=[f"tcp/127.0.0.1:{port}"])
     sub = ZenohSubscribe("dev_sub", config)
@@ -61,6 +64,7 @@ def device(port: int, ticks: int, shm: bool) -> int:
     pub = ZenohPublish("dev_pub", config)
     pub.add("vector", "state", "bench/state", size=N)
     pub.setSharedMemory(shm)
+    pub.setSendThread(thread)
     plug(sub.control, pub.state)  # the state sent: the control received (an echo)
     if not pub.waitForSubscribers(60):
         return 3
@@ -70,7 +74,7 @@ def device(port: int, ticks: int, shm: bool) -> int:
     return 0
 
 
-def round_trip(ticks: int, shm: bool) -> dict[str, np.ndarray]:
+def round_trip(ticks: int, shm: bool, thread: bool = True) -> dict[str, np.ndarray]:
     """Round-trip times and trigger costs (ns) of ``ticks`` ticks paced at 1 kHz."""
     pool.clear()
     port = free_port()
@@ -78,12 +82,15 @@ def round_trip(ticks: int, shm: bool) -> dict[str, np.ndarray]:
     pub = ZenohPublish("ctl_pub", config)
     pub.add("vector", "control", "bench/control", size=N)
     pub.setSharedMemory(shm)
+    pub.setSendThread(thread)
     sub = ZenohSubscribe("ctl_sub", config)
     sub.add("vector", "state", "bench/state", size=N)
     sub.setSync("state", 5.0)
     cmd = [sys.executable, __file__, "--device", str(port), str(ticks)]
     if shm:
         cmd.append("--shm")
+    if not thread:
+        cmd.append("--inline")
     proc = subprocess.Popen(cmd)
     try:
         if not pub.waitForSubscribers(60):
@@ -136,7 +143,7 @@ def sink(port: int, seconds: float) -> int:
     return 0
 
 
-def publisher_cost(ticks: int, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+def publisher_cost(ticks: int, keys: tuple[str, ...], thread: bool) -> dict[str, np.ndarray]:
     """Per tick of the stack of ``sotpy demo talos`` paced at 1 kHz: the time (ns) of the
     trigger of a publisher of the device's ``keys`` (``state``: 39, ``velocity``: 38) to
     a subscriber in another process, and of ``device.increment``."""
@@ -181,6 +188,7 @@ def publisher_cost(ticks: int, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     plug(sot.control, dev.control)
     port = free_port()
     pub = ZenohPublish("pub", loopbackConfig(listen=[f"tcp/127.0.0.1:{port}"]))
+    pub.setSendThread(thread)
     for name in keys:
         pub.add("vector", name, f"bench/talos/{name}")
         plug(dev.signal(name), pub.signal(name))
@@ -227,18 +235,23 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="500 ticks per transport")
     parser.add_argument("--device", nargs=2, type=int, metavar=("PORT", "TICKS"))
     parser.add_argument("--shm", action="store_true")
+    parser.add_argument("--inline", action="store_true")
     parser.add_argument("--sink", nargs=2, type=float, metavar=("PORT", "SECONDS"))
     args = parser.parse_args()
     if args.device:
-        return device(args.device[0], args.device[1], args.shm)
+        return device(args.device[0], args.device[1], args.shm, not args.inline)
     if args.sink:
         return sink(int(args.sink[0]), args.sink[1])
     ticks = 500 if args.quick else 10_000
     print(machine_line(f"eclipse-zenoh {_zenoh_version()}"))
     rows = []
     for name, shm in (("TCP loopback", False), ("shared memory", True)):
-        rows.append((name, round_trip(ticks, shm)))
-    costs = [(keys, publisher_cost(min(ticks, 5000), keys)) for keys in _COST_KEYS]
+        for thread in (True, False):
+            rows.append((f"{name}, {_MODE[thread]}", round_trip(ticks, shm, thread)))
+    costs = [
+        (keys, thread, publisher_cost(min(ticks, 5000), keys, thread))
+        for keys, thread in _COST_KEYS
+    ]
     print(f"\nround trip, {ticks} ticks at 1 kHz, 38-vector control out, 38-vector state back")
     print("| transport | p50 | p99 | worst | its trigger p50 / p99 |")
     print("|---|---|---|---|---|")
@@ -249,10 +262,10 @@ def main() -> int:
             f"{_us(r['cost'], 99):.0f} us |"
         )
     print("\npublisher in a Talos reach tick (at 1 kHz; a subscriber in another process)")
-    print("| keys | clock | trigger p50 / p99 | tick p50 / p99 | ratio p50 / p99 |")
-    print("|---|---|---|---|---|")
-    for keys, cost in costs:
-        what = " + ".join(f"{k} ({_SIZES[k]})" for k in keys)
+    print("| keys | put | clock | trigger p50 / p99 | tick p50 / p99 | ratio p50 / p99 |")
+    print("|---|---|---|---|---|---|")
+    for keys, thread, cost in costs:
+        what = " + ".join(f"{k} ({_SIZES[k]})" for k in keys) + f" | {_MODE[thread]}"
         for clock, suffix in (("wall", ""), ("thread CPU", "_cpu")):
             trig, tick = cost["trigger" + suffix], cost["tick" + suffix]
             c50, c99 = _us(trig, 50), _us(trig, 99)
@@ -261,7 +274,7 @@ def main() -> int:
                 f"| {what} | {clock} | {c50:.1f} / {c99:.1f} us | {t50:.0f} / {t99:.0f} us | "
                 f"{100 * c50 / t50:.1f} / {100 * c99 / t99:.1f} % |"
             )
-    n = len(costs[0][1]["tick"])
+    n = len(costs[0][2]["tick"])
     print(f"({n} ticks each; thread CPU: time.thread_time_ns, what the tick's thread ran)")
     print("target: below 5 %")
     return 0

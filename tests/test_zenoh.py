@@ -356,6 +356,31 @@ def test_a_subscribed_output_set_to_a_constant_ignores_its_key():
         sub.x.value = "two"
 
 
+# -- soak (bash .ci/run soak) -----------------------------------------------------------
+@pytest.mark.soak
+def test_the_split_reach_example_reaches_as_the_single_process_demo():
+    root = HERE.parents[1]
+    cmd = [sys.executable, str(root / "examples" / "zenoh_reach.py"), "--compare"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=root)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "the wrist reached its target" in out.stdout, out.stdout
+    assert "difference between the two trajectories 0.0e+00" in out.stdout, out.stdout
+
+
+@pytest.mark.soak
+def test_a_minute_of_lock_step_round_trips_at_1khz_loses_nothing():
+    import importlib.util
+
+    path = HERE.parents[1] / "benchmarks" / "bench_zenoh.py"
+    spec = importlib.util.spec_from_file_location("bench_zenoh", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    ticks = 60_000
+    r = bench.round_trip(ticks, shm=False)  # raises if a state is not its tick's
+    assert len(r["rtt"]) == ticks and (r["rtt"] > 0).all()
+    assert np.percentile(r["rtt"], 50) < 5e6  # ns: a sanity bound, not a target
+
+
 # -- the peer ----------------------------------------------------------------------------
 def _pace(t0: float, i: int, period: float = 1e-3) -> None:
     while time.perf_counter() < t0 + (i + 1) * period:

@@ -21,8 +21,9 @@ the value). ``setPeriod(k)`` sends every ``k``-th tick (so does
 ``device.after.addDownsampledSignal(pub.trigger, k)``, SoT's way). A value the encoding
 refuses (a NaN) raises :class:`~sotpy.errors.BridgeError` from ``trigger``: nothing is
 sent. The trigger encodes; a thread of the publisher puts the samples, in order, as
-soon as the tick's thread releases the interpreter (its next sleep or wait), with
-congestion control DROP (never blocked by the network) and ``express`` (no batching).
+soon as the tick's thread releases the interpreter (its next sleep or wait;
+``setSendThread(False)`` puts them at once, on the tick's thread), with congestion
+control DROP (never blocked by the network) and ``express`` (no batching).
 A process without a device ticks a publisher with ``ControlLoop("loop", pub, dt)``:
 :meth:`ZenohPublish.increment` reads the trigger at the publisher's tick and moves it
 on.
@@ -335,13 +336,27 @@ class _BridgeEntity(Entity):
 
 
 # -- publishing -------------------------------------------------------------------------
+def _put(key: Any, data: bytes) -> None:
+    """Zenoh's put of one sample, in shared memory when the key asks for it."""
+    if key.shm is not None:
+        buf = key.shm.alloc(len(data))
+        buf[:] = data
+        key.pub.put(buf)
+    else:
+        key.pub.put(data)
+
+
 class _Sender:
     """Puts the samples a publisher's trigger encoded, in order, from a thread of its own.
 
-    Zenoh's ``put`` costs the tick's thread about as much as encoding (bench_zenoh: 27
-    of 65 us of thread CPU in a 1 kHz Talos tick); here the tick queues the bytes and
-    wakes this thread, which runs when the tick's thread next releases the interpreter
-    (a sleep, a lock-step wait, the loop's wait for its next deadline).
+    Measured (bench_zenoh, a 38-vector published after each Talos reach tick at 1 kHz,
+    on a loaded 2-core machine): put on the tick's thread, the trigger took 12-13 % of
+    the tick's thread CPU and 25 % of its wall time (the put's system call wakes the
+    subscriber's process, which takes the core); queued to this thread, 7 % of both.
+    The price is latency: the round trip of the same benchmark grew from 510-550 to
+    670-750 us (p50), the time for this thread to wake and take the interpreter, which
+    it gets when the tick's thread next sleeps or waits. ``setSendThread(False)`` puts
+    on the tick's thread instead.
     """
 
     def __init__(self, who: str) -> None:
@@ -371,12 +386,7 @@ class _Sender:
         while items:
             key, data = items.popleft()
             try:
-                if key.shm is not None:
-                    buf = key.shm.alloc(len(data))
-                    buf[:] = data
-                    key.pub.put(buf)
-                else:
-                    key.pub.put(data)
+                _put(key, data)
             except Exception as exc:  # the session closed, Zenoh refused: say it once
                 if key.key not in self._failed:
                     self._failed.add(key.key)
@@ -419,6 +429,7 @@ class ZenohPublish(_BridgeEntity):
     @Output(INT, withTime=True, timeDependent=True, doc="number of samples sent")
     def trigger(self, t: int, *values: Any) -> int:
         """Reads every input at t and sends one sample per key."""
+        sender = self._sender
         for k, v in zip(self._order, values, strict=True):
             try:
                 data = encode(k.typeName, v, k.seq, t, k.shape)
@@ -427,18 +438,22 @@ class ZenohPublish(_BridgeEntity):
                     f"{self.className}({self.name})::input({k.typeName})::{k.name}: not sent "
                     f"on {k.key!r} at tick {t}: {exc}"
                 ) from None
-            self._sender.queue(k, data)
+            if sender is None:
+                _put(k, data)
+            else:
+                sender.queue(k, data)
             k.seq += 1
             k.sent += 1
             self._sent += 1
-        self._sender.wake()
+        if sender is not None:
+            sender.wake()
         return self._sent
 
     def __init__(self, name: str, config: Any = None) -> None:
         super().__init__(name, config)
         self._order: list[_PubKey] = []
         self._sent = 0
-        self._sender = _Sender(f"{self.className}({name})")
+        self._sender: _Sender | None = _Sender(f"{self.className}({name})")
         self._tick = max(pool.time, 0)
         self._plan = Plan([self.trigger])
 
@@ -501,6 +516,22 @@ class ZenohPublish(_BridgeEntity):
             provider = shm.ShmProvider.default_backend(4 << 20)
             for k in self._order:
                 k.shm = provider
+
+    @command
+    def setSendThread(self, enabled: bool) -> None:
+        """Put the samples from a thread of the publisher (default), or on the tick's
+
+        With the thread, a trigger only encodes and queues (a few us per key) and the
+        samples leave when the tick's thread next sleeps or waits; without it, each put
+        (a system call, which may let the subscriber's process take the core) runs in
+        the tick, and the samples leave at once (lower latency, a longer tick). See
+        docs/zenoh.md, "What it costs".
+        """
+        if enabled and self._sender is None:
+            self._sender = _Sender(f"{self.className}({self.name})")
+        elif not enabled and self._sender is not None:
+            self._sender.close()
+            self._sender = None
 
     @command
     def waitForSubscribers(self, timeout: float = 10.0) -> bool:
