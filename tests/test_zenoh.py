@@ -169,6 +169,58 @@ def test_publisher_refuses_a_nan_and_sends_every_kth_tick():
     assert set(seen) <= {0, 3, 6, 9} and 9 in seen
 
 
+@pytest.mark.parametrize("thread", [True, False])
+def test_shared_memory_and_either_sender_carry_every_bit(thread):
+    a, b, _ = _pair()
+    pub = ZenohPublish("pub", a)
+    pub.setSharedMemory(True)  # before add: the keys added later use it too
+    pub.setSendThread(thread)
+    pub.add("matrix", "m", "t/m")
+    sub = ZenohSubscribe("sub", b)
+    sub.add("matrix", "m", "t/m", size=(3, 4))
+    assert pub.waitForSubscribers(10)
+    m = np.random.default_rng(1).standard_normal((3, 4))
+    pub.m.value = m
+    pub.trigger(0)
+    assert sub.wait("m", 10)
+    assert sub.m.value.tobytes() == m.tobytes()
+
+
+def test_serve_configuration_is_checked(tmp_path):
+    from sotpy.bridge.serve import ServeBridge, loadServeConfig
+
+    def load(text):
+        path = tmp_path / "z.toml"
+        path.write_text(text)
+        return loadServeConfig(path)
+
+    for text, match in (
+        ("colour = 1\n", "unknown entries"),
+        ("wait = -1\n", "wait is a number"),
+        ('[[publish]]\nkey = "a"\n', "signal .a string. is missing"),
+        ('[[publish]]\nsignal = "d.state"\nkey = "a"\ncall = "during"\n', "call is"),
+        ('[[subscribe]]\nsignal = "d.control"\nkey = "a"\nrate = 3\n', "unknown keys"),
+        ("wait = [\n", "not valid TOML"),
+    ):
+        with pytest.raises(BridgeError, match=match):
+            load(text)
+    with pytest.raises(BridgeError, match="cannot read"):
+        loadServeConfig(tmp_path / "missing.toml")
+    device = _arm_device()
+    session = (
+        '[session]\n"scouting/multicast/enabled" = false\n'
+        f'"listen/endpoints" = ["tcp/127.0.0.1:{free_port()}"]\n'
+    )
+    cfg = load(session + '[[publish]]\nsignal = "arm.control"\nkey = "t/a"\n')  # an input
+    with pytest.raises(BridgeError, match="is not an output"):
+        ServeBridge(cfg, device)
+    assert not pool.hasEntity("zenoh_pub")  # nothing left half-built
+    cfg = load(session + '[[subscribe]]\nsignal = "arm.state"\nkey = "t/a"\n')
+    with pytest.raises(BridgeError, match="is not an input"):
+        ServeBridge(cfg, device)
+    assert not pool.hasEntity("zenoh_sub")
+
+
 def test_without_zenoh_the_entities_name_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "zenoh", None)  # import zenoh now fails
     with pytest.raises(BridgeError, match=r"pip install 'sotpy\[zenoh\]'"):

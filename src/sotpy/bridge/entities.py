@@ -454,6 +454,7 @@ class ZenohPublish(_BridgeEntity):
         self._order: list[_PubKey] = []
         self._sent = 0
         self._sender: _Sender | None = _Sender(f"{self.className}({name})")
+        self._shm: Any = None  # the shared-memory provider (setSharedMemory), or None
         self._tick = max(pool.time, 0)
         self._plan = Plan([self.trigger])
 
@@ -480,6 +481,7 @@ class ZenohPublish(_BridgeEntity):
         sig = InputSignal(self, signalName, stype, doc=f"published on {key}")
         self.addSignal(sig)
         k = _PubKey(signalName, typeName, key, pub, shape)
+        k.shm = self._shm
         self._keys[signalName] = k
         self._order.append(k)
         self.trigger.setDependencies([*self.trigger.dependencies, sig])
@@ -501,10 +503,9 @@ class ZenohPublish(_BridgeEntity):
 
     @command
     def setSharedMemory(self, enabled: bool) -> None:
-        """Put the samples in shared memory (Zenoh's SHM, same host only; a peer on
-        another host receives a copy), or in ordinary buffers (the default)."""
-        for k in self._order:
-            k.shm = None
+        """Put the samples of every key in shared memory (Zenoh's SHM, same host only; a
+        peer on another host receives a copy), or in ordinary buffers (the default)."""
+        self._shm = None
         if enabled:
             try:
                 from zenoh import shm
@@ -513,9 +514,9 @@ class ZenohPublish(_BridgeEntity):
                     f"{self._who('setSharedMemory')}: this eclipse-zenoh has no shared memory "
                     f"({exc})"
                 ) from None
-            provider = shm.ShmProvider.default_backend(4 << 20)
-            for k in self._order:
-                k.shm = provider
+            self._shm = shm.ShmProvider.default_backend(4 << 20)
+        for k in self._order:
+            k.shm = self._shm
 
     @command
     def setSendThread(self, enabled: bool) -> None:
