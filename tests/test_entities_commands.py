@@ -223,17 +223,24 @@ def test_clear_forgets_entities_and_resets_the_clock():
     assert pool.getEntity("e") is other
 
 
-def test_remove_unplugs_the_readers():
+def test_remove_is_refused_while_a_reader_is_plugged_and_unplugs_it_inside_a_group():
     a = EntAdd("a")
     a.a.value = 1
     b = EntAdd("b")
     plug(a.out, b.a)
     assert b.out.value == 3.0
+    with pytest.raises(EntityError, match=r"EntAdd\(b\)::input\(double\)::a plugged to a.out"):
+        pool.remove("a")
+    assert pool.hasEntity("a") and b.a.source is a.out and b.out.value == 3.0
+    b.a.unplug()
     pool.remove("a")
     assert not pool.hasEntity("a")
-    assert b.a.source is None
     with pytest.raises(UnpluggedError, match=r"EntAdd\(b\)::input\(double\)::a"):
         b.out(1)
+    c = EntAdd("c")
+    plug(b.out, c.a)
+    pool.remove("b", "c")  # together: the plug between them goes with them
+    assert pool.list() == [] and b.out._dependants == []
 
 
 # -- display ----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import pinocchio as pin
 import pytest
 
 from sotpy.dynamics.device import Device
-from sotpy.errors import SotpyError
+from sotpy.errors import EntityError, LoopError, SotpyError
 from sotpy.graph import DOUBLE, VECTOR, Entity, Input, Output, plug, pool
 from sotpy.loop import ControlLoop, unlocked
 
@@ -150,6 +150,51 @@ def test_constructor_checks():
         ControlLoop("loop2", _light(), 0.0)
 
 
+@pytest.mark.parametrize(
+    ("dt", "why"),
+    [
+        (1e-10, "rounds to 0 ns"),
+        (4.9e-10, "rounds to 0 ns"),
+        (float("inf"), "finite"),
+        (float("nan"), "finite"),
+        (-0.001, "> 0"),
+        (0, "> 0"),
+        (True, "finite number"),
+        ("0.001", "finite number"),
+        (1e300, "longer than a thread can wait"),
+    ],
+)
+def test_a_period_that_cannot_be_kept_is_refused_by_name(dt, why):
+    dev = _light()
+    with pytest.raises(LoopError, match=why) as info:
+        ControlLoop("lp", dev, dt)
+    assert "ControlLoop(lp)" in str(info.value)
+    assert not pool.hasEntity("lp")
+    loop = ControlLoop("lp", dev, 1e-9)  # 1 ns: the shortest period (back to back)
+    loop.run(10)
+    assert loop.ticks == 10 and dev.state.time == 10
+
+
+def test_reset_stats_while_running_starts_a_consistent_run():
+    dev = _light(work=0.0005)  # each tick sleeps 0.5 ms: a mean of 0 cannot be right
+    loop = ControlLoop("loop", dev, 0.002)
+    loop.start()
+    try:
+        time.sleep(0.2)
+        for _ in range(5):
+            loop.resetStats()
+            t0 = time.perf_counter()
+            time.sleep(0.1)
+            s = loop.stats()
+            wall = time.perf_counter() - t0
+            assert 0 < s.ticks <= wall / 0.002 + 2
+            assert s.tick_mean >= 0.0004 and s.tick_max >= s.tick_mean
+            assert s.tick_p99 >= 0.0004
+            assert s.latency_max >= 0 and s.rate > 0
+    finally:
+        loop.stop()
+
+
 # -- atomic edits --------------------------------------------------------------------------
 def _torn_run(use_lock: bool, ticks: int = 10_000) -> tuple[LoopTestPair, int]:
     dev = LoopTestDevice("dev")
@@ -232,15 +277,26 @@ def test_pool_clear_and_remove_stop_the_thread():
     assert not thread.is_alive()
 
 
-def test_device_removed_while_running_faults(caplog):
+def test_device_cannot_leave_the_pool_under_a_loop_and_a_foreign_device_faults(caplog):
     dev = _light()
     loop = ControlLoop("loop", dev, 0.002)
     loop.start()
     time.sleep(0.02)
-    with caplog.at_level(logging.ERROR, logger="sotpy.loop"):
+    with pytest.raises(EntityError, match=r"ControlLoop\(loop\) uses LoopTestDevice\(dev\)"):
         pool.remove(dev)
-        assert loop.wait(2.0)
-    assert loop.fault is not None and "left the pool" in str(loop.fault.exception)
+    n = loop.ticks
+    time.sleep(0.05)
+    assert loop.running and loop.ticks > n and loop.fault is None
+    thread = loop._thread
+    pool.remove("loop", "dev")  # together: the loop stops first
+    assert not thread.is_alive() and pool.list() == []
+    # a device that is not the pool's (removed, here): the first tick faults
+    loop2 = ControlLoop("loop2", dev, 0.002)
+    with (
+        caplog.at_level(logging.ERROR, logger="sotpy.loop"),
+        pytest.raises(SotpyError, match="left the pool"),
+    ):
+        loop2.step(1)
     assert "left the pool" in caplog.text
 
 
@@ -337,6 +393,58 @@ def test_fault_in_torque_mode_before_any_good_tick_uses_gravity():
     loop.clearFault()
     loop.step(20)  # gravity compensated: the arm barely moves (no bounds hit)
     assert np.abs(dev.state.value - q0).max() < 1e-6
+
+
+class LoopTestExiting(Entity):
+    """A velocity source whose callback raises ``exc`` (an instance) at tick ``failAt``."""
+
+    def __init__(self, name: str, exc: BaseException, failAt: int) -> None:
+        self.exc = exc
+        self.failAt = failAt
+
+    @Output(VECTOR, withTime=True)
+    def sout(self, t):
+        if t >= self.failAt:
+            raise self.exc
+        return np.full(6, 0.1)
+
+
+@pytest.mark.parametrize("exc", [SystemExit(3), KeyboardInterrupt()])
+def test_systemexit_and_ctrl_c_in_a_background_tick_take_the_safe_stop(exc, caplog):
+    dev, _ = _manipulator("velocity")
+    src = LoopTestExiting("src", exc, failAt=4)
+    plug(src.sout, dev.control)
+    loop = ControlLoop("loop", dev, 0.002)
+    with caplog.at_level(logging.ERROR, logger="sotpy.loop"):
+        loop.start()
+        assert loop.wait(5.0)
+    f = loop.fault
+    assert f is not None and f.exception is exc and f.tick == 4
+    assert f.signal == src.sout.name
+    assert dev.control.source is None  # unplugged from the failing source
+    np.testing.assert_array_equal(dev.control.value, np.zeros(6))
+    assert type(exc).__name__ in caplog.text
+    with pytest.raises(LoopError, match="fault is pending"):
+        loop.start()
+
+
+@pytest.mark.parametrize("exc", [SystemExit(3), KeyboardInterrupt()])
+def test_systemexit_and_ctrl_c_in_step_make_safe_then_reach_the_caller(exc):
+    dev, _ = _manipulator("velocity")
+    src = LoopTestExiting("src", exc, failAt=2)
+    plug(src.sout, dev.control)
+    loop = ControlLoop("loop", dev, 0.01)
+    with pytest.raises(type(exc)):
+        loop.step(10)
+    assert loop.ticks == 2 and loop.fault is not None and loop.fault.exception is exc
+    assert dev.control.source is None
+    np.testing.assert_array_equal(dev.control.value, np.zeros(6))
+    assert not pool.lock._is_owned()  # released on the way out
+    src.failAt = 10**9
+    loop.recover()
+    assert dev.control.source is src.sout
+    loop.step(2)
+    assert loop.ticks == 4
 
 
 # -- overhead -------------------------------------------------------------------------------

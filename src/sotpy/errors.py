@@ -77,6 +77,24 @@ class SimulationError(SotpyError):
     state is left as it was."""
 
 
+class LoopError(SotpyError, ValueError):
+    """The control loop refused a setting (a period that is not finite, not > 0 or
+    rounds to 0 ns; a spin or window out of range) or a request (ticks while it runs or
+    while a fault is pending). The message names the loop and the value."""
+
+
+class RemoteError(SotpyError):
+    """The remote interpreter refused a connection, a request or a reply, or the
+    connection to it was lost. The message says which."""
+
+
+class RemoteTimeout(KeyboardInterrupt):
+    """Raised in remote code that ran longer than the server's ``exec_timeout``.
+
+    A ``KeyboardInterrupt`` (as Ctrl-C in a local console), so that an
+    ``except Exception`` in the remote code does not swallow it."""
+
+
 class RobotError(SotpyError):
     """Loading or describing a robot failed."""
 

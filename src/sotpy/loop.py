@@ -42,12 +42,18 @@ What is measured (:meth:`ControlLoop.stats`, a :class:`LoopStats`):
 
 p99 and the means are over the last ``window`` ticks (default 10,000); max, counts and
 the achieved rate (tick starts per second) are over the whole run since ``start``,
-``run`` or ``resetStats``.
+``run`` or ``resetStats`` (which may be called while the loop runs: the next tick starts
+the new statistics).
+
+The period ``dt`` is checked when the loop is created: a finite number of seconds > 0
+that is at least 1 ns once rounded to whole ns (the deadlines are integer ns), else
+:class:`~sotpy.errors.LoopError`.
 
 Safe stop on an exception
 -------------------------
-An exception raised during a tick (by any callback upstream of the control, by the
-device's checks, by a ``before``/``after`` signal) stops the loop, is logged on the
+Whatever a tick raises (an exception of any callback upstream of the control, of the
+device's checks, of a ``before``/``after`` signal; also ``SystemExit`` and a Ctrl-C
+``KeyboardInterrupt`` that lands inside the tick) stops the loop, is logged on the
 ``sotpy.loop`` logger and recorded as :attr:`ControlLoop.fault` (a :class:`LoopFault`
 naming the tick, the entity and the signal being computed, and the traceback). The
 device is then made safe by setting its ``control`` input to a constant (this unplugs
@@ -61,18 +67,23 @@ it; the previous source is remembered):
   ``g(q)`` for a fixed-base robot, or zero torque for a floating base (a floating
   robot cannot be gravity-compensated without its contact forces).
 
-Further ticks (``step``, ``start``) are refused while the fault is pending: fix the
-graph, then :meth:`ControlLoop.recover` re-plugs the previous control source (or
-:meth:`ControlLoop.clearFault` keeps the safe constant). The calling thread (the
-shell) is never affected.
+Further ticks (``step``, ``start``) are refused (:class:`~sotpy.errors.LoopError`)
+while the fault is pending: fix the graph, then :meth:`ControlLoop.recover` re-plugs
+the previous control source (or :meth:`ControlLoop.clearFault` keeps the safe
+constant). A background loop's thread ends; the calling thread (the shell) is never
+affected. ``step``/``run`` in the calling thread raise :class:`~sotpy.errors.SotpyError`
+from the exception, or re-raise a ``KeyboardInterrupt``/``SystemExit`` after the safe
+stop (Ctrl-C still interrupts a script).
 
 Shutdown
 --------
 The loop is an entity: ``pool.remove(loop)`` or ``pool.clear()`` stops its thread
-(``onRemove``), as ``stop()`` does; the thread is a daemon, joined by ``stop``. If the
-device leaves the pool while the loop runs, the loop stops at its next tick and records
-a fault. ``stop()`` may be called while holding ``pool.lock`` (from the shell): the
-thread waits for the lock with a timeout and checks for a stop request meanwhile.
+(``onRemove``), as ``stop()`` does; the thread is a daemon, joined by ``stop``. The
+loop uses its device: ``pool.remove(device)`` is refused while the loop is in the pool
+(``pool.remove(loop, device)`` removes both). A loop given a device that is not in the
+pool stops at its first tick with a fault. ``stop()`` may be called while holding
+``pool.lock`` (from the shell): the thread waits for the lock with a timeout and checks
+for a stop request meanwhile.
 """
 
 from __future__ import annotations
@@ -80,6 +91,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import numbers
 import threading
 import time
 import traceback
@@ -89,7 +101,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CommandError, EntityError, SotpyError
+from .errors import CommandError, EntityError, LoopError, SotpyError
 from .graph import Entity, command
 from .graph.pool import pool
 from .graph.signal import Signal
@@ -182,6 +194,39 @@ class LoopFault:
         )
 
 
+class _RunStats:
+    """The statistics of one run (since ``start``, ``run`` or ``resetStats``).
+
+    The loop records each tick into the object ``ControlLoop._stats`` holds at the
+    end of that tick (:meth:`ControlLoop._record`); ``resetStats`` replaces the object,
+    so a reset while the loop runs never mixes two runs (a tick that ends during the
+    reset is counted in the old one). A new per-tick counter is one more field here,
+    counted in ``_record`` and reported by ``stats()``.
+    """
+
+    __slots__ = (
+        "count",
+        "firstBegin",
+        "lastBegin",
+        "latMax",
+        "latNs",
+        "misses",
+        "skipped",
+        "tickMax",
+        "tickNs",
+    )
+
+    def __init__(self, window: int) -> None:
+        self.tickNs = np.zeros(window, dtype=np.int64)  # ring of tick durations, ns
+        self.latNs = np.zeros(window, dtype=np.int64)  # ring of start latencies, ns
+        self.count = 0  # ticks recorded
+        self.tickMax = 0
+        self.latMax = 0
+        self.misses = 0  # ticks that ended after the next deadline
+        self.skipped = 0  # deadlines dropped to catch up
+        self.firstBegin = self.lastBegin = 0  # perf_counter_ns of the first, last tick
+
+
 def _locate(tb: Any) -> tuple[str | None, str | None]:
     """(entity, signal) of the innermost frame of ``tb`` computing a signal."""
     entity = signal = None
@@ -221,6 +266,29 @@ def unlocked() -> Iterator[None]:
         lock._acquire_restore(saved)  # type: ignore[attr-defined]
 
 
+def _isReal(x: Any) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def _periodNs(who: str, dt: Any) -> int:
+    """``dt`` (s) in whole ns, or LoopError: not a finite number > 0, rounding to 0 ns,
+    or longer than a thread can wait (``threading.TIMEOUT_MAX``)."""
+    if not (_isReal(dt) and math.isfinite(dt) and dt > 0):
+        raise LoopError(f"{who}: the period dt must be a finite number of s > 0, got {dt!r}")
+    if dt > threading.TIMEOUT_MAX:
+        raise LoopError(
+            f"{who}: the period dt = {dt:g} s is longer than a thread can wait "
+            f"({threading.TIMEOUT_MAX:g} s)"
+        )
+    ns = round(dt * 1e9)
+    if ns < 1:
+        raise LoopError(
+            f"{who}: the period dt = {dt!r} s rounds to 0 ns (the loop counts whole ns); "
+            "give at least 1e-9 s"
+        )
+    return ns
+
+
 class ControlLoop(Entity):
     """Ticks a device (``increment(dt)``) at ``1 / dt`` Hz; see the module doc.
 
@@ -242,12 +310,11 @@ class ControlLoop(Entity):
         who = f"{self.className}({name})"
         if not callable(getattr(device, "increment", None)):
             raise EntityError(f"{who}: expected a device with increment(dt), got {device!r}")
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-            raise EntityError(f"{who}: dt must be a finite value > 0 s, got {dt!r}")
-        if not (math.isfinite(spin) and spin >= 0):
-            raise EntityError(f"{who}: spin must be a finite value >= 0 s, got {spin!r}")
+        self._period_ns = _periodNs(who, dt)
+        if not (_isReal(spin) and math.isfinite(spin) and spin >= 0):
+            raise LoopError(f"{who}: spin must be a finite number of s >= 0, got {spin!r}")
         if isinstance(window, bool) or not isinstance(window, int) or window < 1:
-            raise EntityError(f"{who}: window must be an integer >= 1, got {window!r}")
+            raise LoopError(f"{who}: window must be an integer >= 1, got {window!r}")
         self._device = device
         self._dt = float(dt)
         self._spin_ns = int(spin * 1e9)
@@ -286,7 +353,7 @@ class ControlLoop(Entity):
     @property
     def ticks(self) -> int:
         """Ticks run since the last ``resetStats`` (or creation)."""
-        return self._count
+        return self._stats.count
 
     # -- commands --------------------------------------------------------------------
     @command
@@ -361,11 +428,12 @@ class ControlLoop(Entity):
     @command
     def stats(self) -> LoopStats:
         """Tick time, latency (jitter), deadline misses and achieved rate (LoopStats)."""
-        n = self._count
+        st = self._stats  # one run's statistics, even if resetStats runs meanwhile
+        n = st.count
         k = min(n, self._window)
-        ticks = self._tickNs[:k]
-        lat = self._latNs[:k]
-        elapsed = self._lastBegin - self._firstBegin
+        ticks = st.tickNs[:k]
+        lat = st.latNs[:k]
+        elapsed = st.lastBegin - st.firstBegin
         rate = (n - 1) / (elapsed * 1e-9) if n > 1 and elapsed > 0 else math.nan
         return LoopStats(
             ticks=n,
@@ -373,12 +441,12 @@ class ControlLoop(Entity):
             rate=rate,
             tick_mean=float(ticks.mean()) * 1e-9 if k else math.nan,
             tick_p99=float(np.percentile(ticks, 99)) * 1e-9 if k else math.nan,
-            tick_max=self._tickMax * 1e-9 if k else math.nan,
+            tick_max=st.tickMax * 1e-9 if k else math.nan,
             latency_mean=float(lat.mean()) * 1e-9 if k else math.nan,
             latency_p99=float(np.percentile(lat, 99)) * 1e-9 if k else math.nan,
-            latency_max=self._latMax * 1e-9 if k else math.nan,
-            misses=self._misses,
-            skipped=self._skipped,
+            latency_max=st.latMax * 1e-9 if k else math.nan,
+            misses=st.misses,
+            skipped=st.skipped,
             running=self.running,
             realtime=self._realtime,
             fault=str(self._fault) if self._fault else None,
@@ -386,15 +454,8 @@ class ControlLoop(Entity):
 
     @command
     def resetStats(self) -> None:
-        """Forget the statistics (tick count, times, misses)."""
-        self._tickNs = np.zeros(self._window, dtype=np.int64)
-        self._latNs = np.zeros(self._window, dtype=np.int64)
-        self._count = 0
-        self._tickMax = 0
-        self._latMax = 0
-        self._misses = 0
-        self._skipped = 0
-        self._firstBegin = self._lastBegin = 0
+        """Forget the statistics (tick count, times, misses); safe while the loop runs."""
+        self._stats = _RunStats(self._window)
 
     @command
     def recover(self) -> None:
@@ -427,6 +488,10 @@ class ControlLoop(Entity):
         with pool.lock:
             yield
 
+    def _holds(self) -> list[Any]:
+        # the device it ticks cannot leave the pool while the loop is there
+        return [self._device] if isinstance(self.__dict__.get("_device"), Entity) else []
+
     def onRemove(self) -> None:
         # the entity leaves the pool (pool.remove, pool.clear): the thread must end
         if "_stopEvent" in self.__dict__:
@@ -438,9 +503,9 @@ class ControlLoop(Entity):
 
     def _checkCanTick(self, cmd: str) -> None:
         if self.running:
-            raise SotpyError(f"{self._who(cmd)}: the loop is running; call stop() first")
+            raise LoopError(f"{self._who(cmd)}: the loop is running; call stop() first")
         if self._fault is not None:
-            raise SotpyError(
+            raise LoopError(
                 f"{self._who(cmd)}: a fault is pending ({self._fault}); fix the graph, then "
                 "call recover() (re-plug the control) or clearFault() (keep the safe control)"
             )
@@ -452,28 +517,29 @@ class ControlLoop(Entity):
             self._checkCanTick(cmd)
             self._stopEvent.clear()
             self._realtime = realtime
-        if n and not self._loop(n, realtime):
-            raise SotpyError(f"{self._who(cmd)}: {self._fault}") from (
-                self._fault.exception if self._fault else None
-            )
+        failure = self._loop(n, realtime) if n else None
+        if failure is None:
+            return
+        if not isinstance(failure, Exception):
+            raise failure  # Ctrl-C, SystemExit: after the safe stop, as the caller expects
+        raise SotpyError(f"{self._who(cmd)}: {self._fault}") from failure
 
     def _threadMain(self, ticks: int | None) -> None:
         try:
-            self._loop(ticks, True)
-        except BaseException:  # pragma: no cover - _loop catches everything it runs
+            self._loop(ticks, True)  # a failure is recorded as the fault and logged
+        except BaseException:  # pragma: no cover - _loop catches everything a tick raises
             log.exception("%s: the loop thread failed", self._who("start"))
 
-    def _loop(self, ticks: int | None, realtime: bool) -> bool:
-        """Run ``ticks`` ticks (None: until stopped); False if a tick raised."""
+    def _loop(self, ticks: int | None, realtime: bool) -> BaseException | None:
+        """Run ``ticks`` ticks (None: until stopped); return what a tick raised (after the
+        safe stop), or None."""
         lock = pool.lock
         clock = time.perf_counter_ns
         stop = self._stopEvent
         increment = self._device.increment
         dt = self._dt
-        period = round(dt * 1e9)
+        period = self._period_ns
         spin = self._spin_ns
-        window = self._window
-        tickNs, latNs = self._tickNs, self._latNs
         torque = self._device.getControlType() == "torque" if self._hasControlType() else False
         version = -1
         deadline = clock()
@@ -482,15 +548,17 @@ class ControlLoop(Entity):
             if realtime:
                 now = clock()
                 if now < deadline - spin and stop.wait((deadline - spin - now) * 1e-9):
-                    return True
+                    return None
                 while clock() < deadline:
                     time.sleep(0)
             if stop.is_set():
-                return True
-            while not lock.acquire(timeout=_LOCK_POLL):
-                if stop.is_set():
-                    return True
+                return None
+            locked = False
             try:
+                while not lock.acquire(timeout=_LOCK_POLL):
+                    if stop.is_set():
+                        return None
+                locked = True
                 begin = clock()
                 if pool.version != version:  # topology changed: is the device still here?
                     version = pool.version
@@ -502,32 +570,42 @@ class ControlLoop(Entity):
                 if torque:
                     self._lastTorque = np.array(self._device.control(t), dtype=np.float64)
                 end = clock()
-            except Exception as exc:
+            except BaseException as exc:  # SystemExit and Ctrl-C too: the device is made safe
+                if not locked:
+                    raise  # interrupted while waiting for the lock: no tick ran
                 self._safeStop(exc)
-                return False
+                return exc
             finally:
-                lock.release()
-            i = self._count % window
-            tickNs[i] = d = end - begin
-            if d > self._tickMax:
-                self._tickMax = d
-            if realtime:
-                latNs[i] = lat = begin - deadline
-                if lat > self._latMax:
-                    self._latMax = lat
-                deadline += period
-                if end > deadline:
-                    self._misses += 1
-                    behind = (end - deadline) // period
-                    if behind:
-                        self._skipped += behind
-                        deadline += behind * period
-            if not self._count:
-                self._firstBegin = begin
-            self._count += 1
-            self._lastBegin = begin
+                if locked:
+                    lock.release()
+            deadline = self._record(begin, end, deadline, period, realtime)
             done += 1
-        return True
+        return None
+
+    def _record(self, begin: int, end: int, deadline: int, period: int, realtime: bool) -> int:
+        """Count one tick (``begin``/``end`` in ns) in the current statistics; return the
+        next deadline (the missed ones skipped)."""
+        st = self._stats
+        i = st.count % self._window
+        st.tickNs[i] = d = end - begin
+        if d > st.tickMax:
+            st.tickMax = d
+        if realtime:
+            st.latNs[i] = lat = begin - deadline
+            if lat > st.latMax:
+                st.latMax = lat
+            deadline += period
+            if end > deadline:
+                st.misses += 1
+                behind = (end - deadline) // period
+                if behind:
+                    st.skipped += behind
+                    deadline += behind * period
+        if not st.count:
+            st.firstBegin = begin
+        st.lastBegin = begin
+        st.count += 1
+        return deadline
 
     def _hasControlType(self) -> bool:
         return callable(getattr(self._device, "getControlType", None))
@@ -540,10 +618,13 @@ class ControlLoop(Entity):
                 f"{self.className}({self.name}): its device {name!r} left the pool; the loop stops"
             )
 
-    def _safeStop(self, exc: Exception) -> None:
+    def _safeStop(self, exc: BaseException) -> None:
         """Record the fault and make the device safe (called holding pool.lock)."""
         dev = self._device
-        entity, signal = _locate(exc.__traceback__)
+        try:
+            entity, signal = _locate(exc.__traceback__)
+        except Exception:  # pragma: no cover - a broken frame: the fault is still recorded
+            entity = signal = None
         tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
         try:
             safe = self._makeSafe()

@@ -180,6 +180,8 @@ class Entity(metaclass=EntityMeta):
     """Base class of every entity. See the module doc for how to declare one."""
 
     className: ClassVar[str] = "Entity"
+    #: True once the entity left the pool (``pool.remove``, ``pool.clear``).
+    _removed: bool = False
     _specs: ClassVar[dict[str, Input | Output]] = {}
     _commands: ClassVar[dict[str, Command]] = {}
 
@@ -225,8 +227,15 @@ class Entity(metaclass=EntityMeta):
         construction that raised): release what it holds outside the graph (threads,
         processes, files). It may run on a partly built entity."""
 
+    def _holds(self) -> Iterable[Entity]:
+        """Entities this one uses outside the signal graph (a loop's device); while it is
+        in the pool, they cannot be removed without it. Default: none."""
+        return ()
+
     def _detach(self) -> None:
-        """Unplug everything connected to this entity (it is being removed)."""
+        """Unplug everything connected to this entity (it is leaving the pool) and mark it
+        removed: its signals can no longer be plugged or made dependencies."""
+        object.__setattr__(self, "_removed", True)
         for sig in self._signals.values():
             for d in list(sig._dependants):
                 if isinstance(d, InputSignal) and d.entity is not self:
@@ -378,3 +387,59 @@ class Entity(metaclass=EntityMeta):
 
     def __repr__(self) -> str:
         return f"{self.className}({self.name!r})"
+
+
+def _users(group: list[Entity]) -> dict[str, str]:
+    """What uses the entities of ``group`` from outside it: ``{"user": "reads a.x, a.y"}``
+    (the user a signal's full name, a periodic call or an entity), empty when nothing
+    does.
+
+    A use is an input plugged to one of their outputs, an output whose callback reads
+    one of their signals (a task reading a feature, a solver its tasks, a tracer the
+    traced signals), a periodic call (a device's ``before``/``after``) refreshing one of
+    their signals, or an entity holding one of them outside the graph (``_holds``: a
+    loop's device).
+    """
+    from .plan import PeriodicCall
+
+    inside = {id(e) for e in group}
+    uses: dict[str, dict[str, list[str]]] = {}
+
+    def use(who: str, verb: str, what: str) -> None:
+        lst = uses.setdefault(who, {}).setdefault(verb, [])
+        if what not in lst:
+            lst.append(what)
+
+    for e in group:
+        for sig in e._signals.values():  # type: ignore[attr-defined]
+            for d in sig._dependants:
+                if id(d.entity) not in inside:
+                    use(d.name, "plugged to" if isinstance(d, InputSignal) else "reads", sig.path)
+    for other in pool.entities():
+        if id(other) in inside:
+            continue
+        who = f"{other.className}({other.name})"
+        for attr, value in vars(other).items():
+            if isinstance(value, PeriodicCall):
+                for sigs in value._signals.values():
+                    for s in sigs:
+                        if id(s.entity) in inside:
+                            use(f"{who}.{attr}", "refreshes", s.path)
+        for held in other._holds():
+            if id(held) in inside:
+                use(who, "uses", f"{held.className}({held.name})")
+    return {
+        who: "; ".join(f"{verb} {', '.join(what)}" for verb, what in verbs.items())
+        for who, verbs in uses.items()
+    }
+
+
+def _forgetFused(group: list[Entity]) -> None:
+    """Drop the outputs of ``group`` (removed) from the fused readers of the signals
+    left in the pool (see :meth:`OutputSignal.setPlanFusion`)."""
+    gone = {id(e) for e in group}
+    for other in pool.entities():
+        for sig in other._signals.values():  # type: ignore[attr-defined]
+            readers = sig._fusedReaders
+            if readers and any(id(r.entity) in gone for r in readers):
+                sig._fusedReaders = tuple(r for r in readers if id(r.entity) not in gone)

@@ -79,12 +79,56 @@ class Pool:
         """Names of the entities, in creation order."""
         return list(self._entities)
 
-    def remove(self, entity: Entity | str) -> None:
-        """Unplug every input of ``entity`` fed by it or feeding it, and drop it."""
-        e = self.getEntity(entity if isinstance(entity, str) else entity.name)
-        e.onRemove()
-        e._detach()
-        del self._entities[e.name]
+    def remove(self, *entities: Entity | str) -> None:
+        """Remove ``entities`` (entities or names) from the pool, all together.
+
+        Refused with :class:`~sotpy.errors.EntityError`, leaving the graph as it was,
+        while anything outside the group still uses one of them: an input plugged to
+        one of their outputs, an output computed from one of their signals (a solver
+        reading a task, a task its features, a tracer the traced signals), a periodic
+        call refreshing one of their signals, an entity holding one of them (a loop its
+        device). The message names every user; take the entity out of them first
+        (``sot.remove(task)``, ``task.remove(feature)``, ``tracer.remove(label)``,
+        ``unplug()``) or remove the users in the same call
+        (``pool.remove("task", "feature")``). Then each entity's ``onRemove()`` runs (it
+        releases threads, servers, files), its signals are unplugged from one another,
+        it leaves the pool and it is marked removed: a stale Python reference to it can
+        no longer be plugged, pushed or traced. The name is free for a new entity.
+        """
+        from .entity import _forgetFused, _users
+
+        if not entities:
+            raise EntityError("pool.remove: name at least one entity to remove")
+        group: list[Entity] = []
+        for entity in entities:
+            name = entity if isinstance(entity, str) else getattr(entity, "name", None)
+            if not isinstance(name, str):
+                raise EntityError(f"pool.remove: expected an entity or its name, got {entity!r}")
+            e = self.getEntity(name)
+            if not isinstance(entity, str) and e is not entity:
+                raise EntityError(
+                    f"pool.remove: {entity!r} is not the entity the pool holds under the name "
+                    f"{name!r} (it was removed already)"
+                )
+            if not any(g is e for g in group):
+                group.append(e)
+        users = _users(group)
+        if users:
+            names = ", ".join(f"{g.className}({g.name})" for g in group)
+            uses = "; ".join(f"{who} {what}" for who, what in users.items())
+            owners = [who.split("(", 1)[1].split(")", 1)[0] for who in users]
+            together = ", ".join(map(repr, dict.fromkeys([*(g.name for g in group), *owners])))
+            raise EntityError(
+                f"cannot remove {names}: still used by {uses}. Nothing was removed: take it "
+                "out of them first (a solver's or a task's remove(...), a tracer's "
+                f"remove(label), unplug()), or remove them together: pool.remove({together})"
+            )
+        for e in group:
+            e.onRemove()
+        for e in group:
+            e._detach()
+            del self._entities[e.name]
+        _forgetFused(group)
         self.version += 1
 
     def clear(self) -> None:

@@ -288,6 +288,8 @@ class OutputSignal(Signal):
         for s in new:
             if not isinstance(s, Signal):
                 raise PlugError(f"{self.name}: dependency {s!r} is not a signal")
+        if new:
+            _refuse_removed((self, *new), f"{self.name}: cannot set its dependencies")
         if self._mode == FUNCTION:
             for s in new:
                 _refuse_cycle(s, self, f"making {self.name} depend on {s.name}")
@@ -566,6 +568,7 @@ def plug(source: Signal, target: Signal) -> None:
         )
     if target._source is source:
         return
+    _refuse_removed((source, target), f"cannot plug {source.name} into {target.name}")
     _refuse_cycle(source, target, f"plugging {source.name} into {target.name}")
     if target._source is not None:
         _remove_dependant(target._source, target)
@@ -782,6 +785,18 @@ def _refuse_cycle(source: Signal, reader: Signal, action: str) -> None:
         + " (each reads the next; break it with a Delay entity or a state signal)",
         cycle,
     )
+
+
+def _refuse_removed(signals: Iterable[Signal], action: str) -> None:
+    """Raise PlugError if one of ``signals`` belongs to an entity removed from the pool
+    (a stale reference kept by a script): wiring it would use a dead entity."""
+    for s in signals:
+        e = s.entity
+        if getattr(e, "_removed", False):
+            raise PlugError(
+                f"{action}: {e.className}({e.name}) was removed from the pool "
+                f"({s.name}); create it again, or use the entity the pool holds now"
+            )
 
 
 def _check_period(sig: Signal, period: Any) -> int:

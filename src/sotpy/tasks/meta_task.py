@@ -153,9 +153,9 @@ class _MetaTask:
         try:
             steps()
         except BaseException:
-            for n in pool.list():
-                if n not in before:
-                    pool.remove(n)
+            created = [n for n in pool.list() if n not in before]
+            if created:
+                pool.remove(*created)  # together: they use one another
             raise
 
     def entities(self) -> list[Entity]:

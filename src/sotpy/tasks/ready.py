@@ -515,6 +515,6 @@ class ReadyTasks(Mapping[str, Any]):
 
 
 def _remove(meta: Any) -> None:
-    for e in meta.entities():
-        if pool.hasEntity(e.name):
-            pool.remove(e.name)
+    names = [e.name for e in meta.entities() if pool.hasEntity(e.name)]
+    if names:
+        pool.remove(*names)  # together: they use one another
