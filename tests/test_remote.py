@@ -84,11 +84,19 @@ def test_exception_in_remote_code_is_returned_and_loop_runs(served):
     assert _ticking(loop)
 
 
-def test_each_input_runs_holding_the_pool_lock(served):
+def test_remote_code_runs_beside_the_loop_and_loop_edit_is_atomic(served):
     server, _ = served
     with RemoteClient("127.0.0.1", server.address[1], server.token) as c:
-        # no tick between two reads in one input; the loop ticks between inputs
-        out = c.execute("n0 = loop.ticks\ntime.sleep(0.05)\nprint(loop.ticks - n0)")
+        # an input does not hold the loop: it ticks during a plain sleep
+        out = c.execute("n0 = loop.ticks\ntime.sleep(0.1)\nprint(loop.ticks - n0)")
+        assert int(out) > 10  # 0.1 s at 500 Hz is 50 ticks
+        # no tick inside loop.edit(), nor inside one call into sotpy
+        out = c.execute(
+            "with loop.edit():\n"
+            "    n0 = loop.ticks\n"
+            "    time.sleep(0.05)\n"
+            "    print(loop.ticks - n0)"
+        )
         assert out == "0\n"
         out = c.execute(
             "n0 = loop.ticks\nwith unlocked(): time.sleep(0.05)\nprint(loop.ticks - n0)"

@@ -265,9 +265,29 @@ def _serve_run(args: argparse.Namespace) -> int:
     import time
 
     from .errors import SotpyError
-    from .remote import RemoteServer, defaultConnectionFile
+    from .remote import RemoteServer, _isLoopback, defaultConnectionFile
     from .shell import makeNamespace
 
+    try:
+        loopback = _isLoopback(args.host)
+    except SotpyError as exc:
+        print(f"sotpy serve: {exc}", file=sys.stderr)
+        return 2
+    if not loopback:
+        if not args.allow_remote:
+            print(
+                f"sotpy serve: --host {args.host} is not a loopback address: the token and "
+                "every line would travel unencrypted on the network. Add --allow-remote to "
+                "do it anyway, or keep 127.0.0.1 and use an SSH tunnel (ssh -L).",
+                file=sys.stderr,
+            )
+            return 2
+        print(
+            f"sotpy serve: WARNING: listening on {args.host}: the token and every line "
+            "travel unencrypted; anyone on the network path can read them",
+            file=sys.stderr,
+            flush=True,
+        )
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     try:
         ns = makeNamespace(args.robot, args.dt)
@@ -285,7 +305,9 @@ def _serve_run(args: argparse.Namespace) -> int:
             return 1
     path = args.connection_file or defaultConnectionFile()
     try:
-        server = RemoteServer(ns, host=args.host, port=args.port, connectionFile=path)
+        server = RemoteServer(
+            ns, host=args.host, port=args.port, connectionFile=path, allow_remote=not loopback
+        )
     except OSError as exc:
         print(f"sotpy serve: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
         return 1
@@ -299,7 +321,11 @@ def _serve_run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, _terminate)
     try:
-        server.start()  # writes the connection file
+        try:
+            server.start()  # writes the connection file
+        except SotpyError as exc:  # e.g. a connection file directory others may write
+            print(f"sotpy serve: {exc}", file=sys.stderr)
+            return 1
         if bridge is not None:
             bridge.ready(lambda text: print(text, flush=True))
         if not args.paused:
@@ -333,6 +359,11 @@ def add_serve(subparsers: Any) -> None:
     )
     _robot_arg(p)
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+    p.add_argument(
+        "--allow-remote",
+        action="store_true",
+        help="accept a --host that is not loopback (the channel is NOT encrypted)",
+    )
     p.add_argument("--port", type=int, default=0, help="TCP port (0: a free one)")
     p.add_argument("--connection-file", metavar="PATH", help="where to write address+token")
     p.add_argument("--paused", action="store_true", help="do not start the loop")

@@ -94,6 +94,11 @@ class RemoteTimeout(KeyboardInterrupt):
     A ``KeyboardInterrupt`` (as Ctrl-C in a local console), so that an
     ``except Exception`` in the remote code does not swallow it."""
 
+    def __init__(self, *args: object) -> None:
+        super().__init__(
+            *(args or ("remote input interrupted: it ran longer than the server's exec_timeout",))
+        )
+
 
 class RobotError(SotpyError):
     """Loading or describing a robot failed."""
