@@ -511,9 +511,10 @@ class Device(Entity):
         The contact acceleration is required to be ``-Kp e - Kd de/dt``, ``e`` the
         placement error of the contact frame. Default 100 and 20 (critically damped).
         """
-        if Kp < 0 or Kd < 0:
+        if not (0 <= Kp < math.inf and 0 <= Kd < math.inf):
             raise CommandError(
-                f"{self._who('setContactGains')}: gains must be >= 0, got Kp={Kp}, Kd={Kd}"
+                f"{self._who('setContactGains')}: gains must be finite and >= 0, got Kp={Kp}, "
+                f"Kd={Kd}"
             )
         self._contactKp, self._contactKd = Kp, Kd
         if self._contactModels is not None:

@@ -49,10 +49,27 @@ def homogeneousToSE3(M: Any, where: str = "", tolerance: float = ROTATION_TOLERA
     return pin.SE3(U @ Vt, M[:3, 3].copy())
 
 
+def _checkPlacement(M: pin.SE3, tolerance: float = ROTATION_TOLERANCE) -> None:
+    """Refuse (ValueError) a ``pinocchio.SE3`` whose rotation is not one, within
+    ``tolerance``, or with non-finite entries: ``pin.SE3(5 * I, p)`` constructs."""
+    R, p = M.rotation, M.translation
+    if not (np.isfinite(R).all() and np.isfinite(p).all()):
+        raise ValueError("the placement has non-finite entries")
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if not (err <= tolerance and abs(det - 1.0) <= tolerance):
+        raise ValueError(
+            f"the rotation of the placement is not a rotation (max|R^T R - I| = {err:.3g}, "
+            f"det R = {det:.6g}; tolerance {tolerance:g})"
+        )
+
+
 def _toSE3(v: Any) -> pin.SE3:
     """A placement written to an SE3 signal: a ``pinocchio.SE3`` (copied), or a 4 x 4
-    homogeneous matrix as SoT writes it (an array, a numpy matrix, a tuple of rows)."""
+    homogeneous matrix as SoT writes it (an array, a numpy matrix, a tuple of rows);
+    either checked to hold a rotation."""
     if isinstance(v, pin.SE3):
+        _checkPlacement(v)
         return v.copy()
     if isinstance(v, (str, bytes)) or not hasattr(v, "__len__"):
         raise TypeError(
@@ -65,8 +82,9 @@ def _toSE3(v: Any) -> pin.SE3:
 
 
 #: ``pinocchio.SE3`` placements; traced as the 16 entries of the homogeneous matrix
-#: (row-major). A constant may be written as a ``pinocchio.SE3`` or, as SoT scripts do,
-#: as a 4 x 4 homogeneous matrix (array, numpy matrix or tuple of 4 rows): it is checked
-#: (:func:`homogeneousToSE3`) and stored as a ``pinocchio.SE3``.
+#: (row-major). A constant may be written as a ``pinocchio.SE3`` (its rotation checked to
+#: be one) or, as SoT scripts do, as a 4 x 4 homogeneous matrix (array, numpy matrix or
+#: tuple of 4 rows): it is checked (:func:`homogeneousToSE3`) and stored as a
+#: ``pinocchio.SE3``.
 SE3 = object_type("SE3", pin.SE3, to_array=lambda M: M.homogeneous.ravel())
 SE3.convert = _toSE3

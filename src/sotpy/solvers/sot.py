@@ -649,6 +649,15 @@ class SOT(Entity):
         bounded joints, their limits (inf where none) and the level's matrix."""
         ql, qu = np.asarray(lower)[self._iq], np.asarray(upper)[self._iq]
         vm = np.asarray(vmax)[self._iv]
+        # refused where they enter: swapped or NaN limits, a negative velocity limit
+        bad = ~(ql <= qu) | ~(vm >= 0)
+        if bad.any():
+            j = int(np.flatnonzero(bad)[0])
+            raise SignalTypeError(
+                f"SOT({self.name}): joint at q[{self._iq[j]}]: {self.lowerJl.name} = {ql[j]:g}, "
+                f"{self.upperJl.name} = {qu[j]:g}, {self.upperVl.name} = {vm[j]:g}: expected "
+                "lower <= upper and a velocity limit >= 0 (swapped limits?)"
+            )
         # Pinocchio writes ~1.8e308 where a model gives no limit: no bound there
         vm = np.where(vm < _NO_LIMIT, vm, np.inf)
         ql = np.where(ql > -_NO_LIMIT, ql, -np.inf)

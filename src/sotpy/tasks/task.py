@@ -288,9 +288,22 @@ class Task(TaskAbstract):
             raise SignalTypeError(
                 f"{self.controlGain.name}: expected a finite gain >= 0 (1/s), got {gain}"
             )
-        if errordot:
-            return -gain * error - errordot[0]
-        return error * -gain
+        t = -gain * error - errordot[0] if errordot else error * -gain
+        # finite iff the sum of squares is (an overflow falls back to the exact test)
+        if not math.isfinite(t.dot(t)) and not np.isfinite(t).all():
+            raise self._nonFiniteTarget(t, gain, error, errordot)
+        return t
+
+    def _nonFiniteTarget(
+        self, t: np.ndarray, gain: float, error: np.ndarray, errordot: tuple[Any, ...]
+    ) -> SotpyError:
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        extra = f", errorTimeDerivative[{i}] = {errordot[0][i]:g}" if errordot else ""
+        return SotpyError(
+            f"{self.task.name}[{i}] = -controlGain * error is not finite (controlGain = "
+            f"{gain:g} 1/s, error[{i}] = {error[i]:g}{extra}): "
+            f"refused; lower {self.controlGain.name} or check the features' errors"
+        )
 
     def _wireOutputs(self) -> None:
         self.task.setDependencies([self.controlGain, self.error, *self._withDerivativeDeps()])
@@ -339,6 +352,9 @@ class Task(TaskAbstract):
                     return -1
             if cols is not None:
                 A[r0:r] *= selec.mask(n)
+            t = b[r0:r]
+            if not isfinite(t.dot(t)) and not np.isfinite(t).all():
+                return -1  # a target that overflowed: the task callback names it
             return r - r0
 
         return RowWriter(sources, write)
@@ -422,6 +438,17 @@ class TaskInequality(TaskAbstract):
                 )
             bounds.append(b)
         inf, sup = bounds
+        # a lower bound of +inf or an upper bound of -inf cannot be met (NaN neither)
+        lowerOk, upperOk = inf < np.inf, sup > -np.inf
+        for sig, b, ok, free in (
+            (self.referenceInf, inf, lowerOk, "-inf"),
+            (self.referenceSup, sup, upperOk, "+inf"),
+        ):
+            if not ok.all():
+                i = int(np.flatnonzero(~ok)[0])
+                raise SignalTypeError(
+                    f"{sig.name}[{i}] = {b[i]}: a bound no error can meet; use {free} for no bound"
+                )
         if (inf > sup).any():
             i = int(np.flatnonzero(inf > sup)[0])
             raise SignalTypeError(
@@ -429,9 +456,27 @@ class TaskInequality(TaskAbstract):
                 f"referenceSup[{i}] = {sup[i]:g}: empty interval"
             )
         c = k / dt
+        if not math.isfinite(c):
+            raise SignalTypeError(
+                f"{self.className}({self.name}): controlGain / dt = {k:g} / {dt:g} s is not "
+                f"finite ({self.controlGain.name}, {self.dt.name})"
+            )
         lo = c * (inf - e)
         up = c * (sup - e)
         if errordot:
             lo -= errordot[0]
             up -= errordot[0]
+        # A row with both references infinite stays free (-inf, +inf): it bounds nothing.
+        # A finite reference must give a finite bound (an overflow would silently drop it).
+        for sig, ref, out in ((self.referenceInf, inf, lo), (self.referenceSup, sup, up)):
+            bad = np.isfinite(ref) != np.isfinite(out)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                name = (self.lower if out is lo else self.upper).name
+                raise SignalTypeError(
+                    f"{name}[{i}] = (controlGain / dt) "
+                    f"({sig.shortName}[{i}] - error[{i}]) is not finite (controlGain = {k:g}, "
+                    f"dt = {dt:g} s, {sig.shortName}[{i}] = {ref[i]:g}, error[{i}] = "
+                    f"{e[i]:g}): refused"
+                )
         return lo, up
