@@ -41,11 +41,11 @@ How remote code runs with the control loop: not under the tick's lock. Each call
 makes into sotpy (a command, a signal read or write, a plug, an entity's creation) holds
 :attr:`pool.lock <sotpy.graph.pool.Pool.lock>` for that call only, so a tick never sees
 half an edit; the rest (a loop, a ``time.sleep``, numpy, printing) runs while the loop
-ticks, and every few hundred lines it yields the interpreter so that the loop keeps its
-rate. Edits that must land together go in ``with loop.edit():`` (no tick runs inside
-the block). With ``exec_timeout`` set, remote code still running after that many
-seconds is interrupted (:class:`~sotpy.errors.RemoteTimeout`, a ``KeyboardInterrupt``)
-at its next line; a call into sotpy or a blocking C call finishes first. The loop never
+ticks, and yields the interpreter every 0.1 ms so that the loop keeps its rate (see
+:class:`_GraphScope`). Edits that must land together go in ``with loop.edit():`` (no
+tick runs inside the block). With ``exec_timeout`` set, remote code still running after
+that many seconds is interrupted (:class:`~sotpy.errors.RemoteTimeout`, a
+``KeyboardInterrupt``); a call into sotpy or a blocking C call finishes first. The loop never
 waits on a client's socket. All connections share one namespace (one interpreter in the
 controller, as in SoT), each with its own pending-statement buffer, and run at the same
 time. An exception in remote code is returned as a traceback; a dropped client ends its
@@ -74,7 +74,6 @@ import io
 import ipaddress
 import json
 import logging
-import math
 import os
 import rlcompleter
 import secrets
@@ -83,6 +82,7 @@ import socketserver
 import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 from types import FrameType
 from typing import Any, TextIO
@@ -389,12 +389,12 @@ _THIS_FILE = os.path.abspath(__file__)
 #: which needs the lock to end its tick).
 _WAITS = frozenset({unlocked.__wrapped__.__code__, ControlLoop.wait.fn.__code__})  # type: ignore[attr-defined]
 _COMMAND_CALL = BoundCommand.__call__.__code__
-#: Lines of remote (non-sotpy) code between two yields of the interpreter to the loop.
-_YIELD_LINES = 200
+#: Remote code yields the interpreter (``time.sleep(0)``) after running this long, in ns.
+_YIELD_NS = 100_000
+#: Lines of remote code between two looks at the clock.
+_CLOCK_LINES = 32
 #: A call into sotpy that holds the lock longer than this (s) is logged (the loop waited).
 _SLOW_CALL = 0.1
-#: s after exec_timeout at which the watchdog interrupts code that makes no line events.
-_GRACE = 0.25
 
 
 def _setAsyncExc(thread: int, exc: type[BaseException]) -> None:
@@ -405,25 +405,29 @@ def _setAsyncExc(thread: int, exc: type[BaseException]) -> None:
 
 
 class _GraphScope:
-    """Runs one remote input in the calling thread with ``sys.settrace``:
+    """Runs one remote input in the calling thread, beside the control loop.
 
-    * a call into sotpy (a frame of a module of the package, other than this one) made
-      from remote code holds ``pool.lock`` until it returns; what it calls runs
-      untraced, under that lock;
-    * every :data:`_YIELD_LINES` lines of other code, the interpreter is yielded
-      (``time.sleep(0)``), so that the loop thread gets it at once instead of after the
-      switch interval (5 ms), and the deadline is checked: past it,
-      :class:`~sotpy.errors.RemoteTimeout` is raised at that line of remote code;
-    * code that makes no line events (a loop on one line, ``while True: pass``) is
-      interrupted by a watchdog timer :data:`_GRACE` s after the deadline, then every
-      second while it runs (``PyThreadState_SetAsyncExc``), never while the thread is
-      in a call into sotpy (``_gate`` makes the check and the raise atomic with
-      entering one): the exception starts, at the latest, at the first instruction of
-      the next sotpy function, before it changed anything.
+    * **Lock scoping** (``sys.settrace``, call events only): a call into sotpy (a frame
+      of a module of the package other than this one) made from remote code holds
+      ``pool.lock`` until it returns; what it calls runs untraced, under that lock. The
+      rest of the remote code runs without the lock and without line tracing.
+    * **The loop gets the interpreter**: the lines of remote code (not of sotpy) are
+      traced, and after :data:`_YIELD_NS` of running the thread yields the interpreter
+      (``time.sleep(0)``), so that a loop thread waking for a tick gets it within about
+      0.1 ms instead of after the switch interval (5 ms). Measured: a 1 kHz loop keeps
+      its rate against a spinning client, where waiting for the switch interval leaves
+      it near 350 Hz (``docs/shell.md``). The price is the line tracing: a tight loop of
+      pure Python in remote code runs several times slower than in a script.
+    * **exec_timeout**: a watchdog timer raises :class:`~sotpy.errors.RemoteTimeout` in
+      the thread (``PyThreadState_SetAsyncExc``) at the deadline, then every second
+      while the input runs, never while the thread is in a call into sotpy (``_gate``
+      makes the check and the raise atomic with entering one): the exception starts,
+      at the latest, at the first instruction of the next sotpy function, before it
+      changed anything. A call into sotpy, or a blocking call in C, finishes first.
 
-    An interrupt unsets the trace function (CPython's rule when it raises): code that
-    catches it runs the rest of its input without lock scoping. Whatever the input
-    leaves held of ``pool.lock`` is released when it ends.
+    An interrupt that lands in the trace function unsets it (CPython's rule): code that
+    catches the interrupt may run the rest of its input without lock scoping. Whatever
+    the input leaves held of ``pool.lock`` is released when it ends.
     """
 
     def __init__(self, timeout: float | None, peer: str) -> None:
@@ -431,21 +435,21 @@ class _GraphScope:
         self._peer = peer
         self._frame: FrameType | None = None  # the sotpy frame holding the lock
         self._since = 0.0
-        self._lines = 0
-        self._deadline = 0.0
         self._gate = threading.Lock()  # the watchdog's check and raise vs entering sotpy
         self._running = False
         self._thread = 0
         self._timer: threading.Timer | None = None
+        self._lines = 0
+        self._yielded = 0
 
     def run(self, fn: Any, *args: Any) -> Any:
         self._frame = None
-        self._lines = 0
-        self._deadline = math.inf if self._timeout is None else time.monotonic() + self._timeout
         self._thread = threading.get_ident()
         self._running = True
+        self._lines = 0
+        self._yielded = time.perf_counter_ns()
         if self._timeout is not None:
-            self._arm(self._timeout + _GRACE)
+            self._arm(self._timeout)
         previous = sys.gettrace()
         sys.settrace(self._call)
         try:
@@ -518,14 +522,13 @@ class _GraphScope:
             pool.lock.release()
             held = time.monotonic() - self._since
             if held > _SLOW_CALL:
+                code_obj = frame.f_code
                 log.warning(
                     "client %s: %s (%s:%d) held the graph lock for %.2f s: the loop waited",
                     self._peer,
-                    frame.f_code.co_qualname
-                    if hasattr(frame.f_code, "co_qualname")
-                    else frame.f_code.co_name,
-                    os.path.relpath(frame.f_code.co_filename, _PACKAGE),
-                    frame.f_code.co_firstlineno,
+                    getattr(code_obj, "co_qualname", code_obj.co_name),
+                    os.path.relpath(code_obj.co_filename, _PACKAGE),
+                    code_obj.co_firstlineno,
                     held,
                 )
         return self._graph
@@ -533,19 +536,12 @@ class _GraphScope:
     def _line(self, frame: FrameType, event: str, arg: Any) -> Any:
         if event == "line":
             self._lines += 1
-            if self._lines >= _YIELD_LINES:
+            if self._lines >= _CLOCK_LINES:
                 self._lines = 0
-                time.sleep(0)  # let a waiting loop thread run now
-                if time.monotonic() > self._deadline:
-                    log.warning(
-                        "client %s: remote input interrupted after %g s (exec_timeout)",
-                        self._peer,
-                        self._timeout,
-                    )
-                    raise RemoteTimeout(
-                        f"remote input interrupted: it ran longer than the server's "
-                        f"exec_timeout ({self._timeout:g} s)"
-                    )
+                now = time.perf_counter_ns()
+                if now - self._yielded >= _YIELD_NS:
+                    time.sleep(0)  # a loop thread waiting for the interpreter runs now
+                    self._yielded = time.perf_counter_ns()
         return self._line
 
 
@@ -562,8 +558,16 @@ class _Console(code.InteractiveConsole):
             self._scope.run(exec, code_obj, self.locals)
         except SystemExit:
             raise
-        except BaseException:
-            self.showtraceback()
+        except BaseException as exc:
+            if isinstance(exc, RemoteTimeout) and self._scope._timeout is not None:
+                exc.args = (
+                    "remote input interrupted: it ran longer than the server's exec_timeout "
+                    f"({self._scope._timeout:g} s)",
+                )
+            tb = exc.__traceback__  # from the remote code on: not the server's frames
+            while tb is not None and tb.tb_frame.f_code.co_filename != self.filename:
+                tb = tb.tb_next
+            self.write("".join(traceback.format_exception(type(exc), exc, tb or exc.__traceback__)))
 
 
 class _ClientGone(Exception):

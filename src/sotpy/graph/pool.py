@@ -9,8 +9,12 @@ There is one :data:`pool` per process: it is the only global state of sotpy. It 
   mode change, which tells compiled plans to recompile,
 - :attr:`Pool.lock`, a re-entrant lock held by a running loop
   (:class:`sotpy.loop.ControlLoop`) during each tick; hold it to edit the graph
-  atomically from another thread (the shell and the remote interpreter hold it while
-  they execute each input). Signals never take it: a tick pays one acquire/release.
+  atomically from another thread (the shell holds it while it executes each input, the
+  remote interpreter during each call into sotpy). Signals never take it: a tick pays
+  one acquire/release.
+
+An entity leaves the pool with :meth:`Pool.remove`, which refuses while something
+outside the removed group still uses it (see its doc and ``docs/graph.md``).
 
 :data:`factory` maps class names to entity classes; a subclass of ``Entity`` registers
 itself when it is defined.
