@@ -425,9 +425,12 @@ class _GraphScope:
       at the latest, at the first instruction of the next sotpy function, before it
       changed anything. A call into sotpy, or a blocking call in C, finishes first.
 
-    An interrupt that lands in the trace function unsets it (CPython's rule): code that
-    catches the interrupt may run the rest of its input without lock scoping. Whatever
-    the input leaves held of ``pool.lock`` is released when it ends.
+    An interrupt that lands in a trace function (often: one runs at every line) unsets
+    it (CPython's rule): code that catches that one runs the rest of its input without
+    lock scoping, and is not interrupted again (the next interrupt could land inside a
+    call into sotpy, now unguarded); one seen landing in remote code (an ``exception``
+    event) is repeated every second while the input runs.
+    Whatever the input leaves held of ``pool.lock`` is released when it ends.
     """
 
     def __init__(self, timeout: float | None, peer: str) -> None:
@@ -441,6 +444,7 @@ class _GraphScope:
         self._timer: threading.Timer | None = None
         self._lines = 0
         self._yielded = 0
+        self._delivered = True
 
     def run(self, fn: Any, *args: Any) -> Any:
         self._frame = None
@@ -448,6 +452,7 @@ class _GraphScope:
         self._running = True
         self._lines = 0
         self._yielded = time.perf_counter_ns()
+        self._delivered = True  # no interrupt on its way
         if self._timeout is not None:
             self._arm(self._timeout)
         previous = sys.gettrace()
@@ -487,14 +492,19 @@ class _GraphScope:
         with self._gate:
             if not self._running:
                 return
+            if not self._delivered:
+                # the last one landed in a trace function: tracing, and so the lock
+                # scoping, is gone; another could land inside a call into sotpy
+                return
             if self._frame is None:
+                self._delivered = False
                 _setAsyncExc(self._thread, RemoteTimeout)
                 log.warning(
                     "client %s: remote input interrupted after %g s (exec_timeout)",
                     self._peer,
                     self._timeout,
                 )
-            self._arm(1.0)  # again, while it runs (in sotpy now, or it caught the last)
+            self._arm(1.0)  # again while it runs: it was in sotpy, or it caught the last
 
     def _call(self, frame: FrameType, event: str, arg: Any) -> Any:
         if self._frame is not None:
@@ -534,7 +544,9 @@ class _GraphScope:
         return self._graph
 
     def _line(self, frame: FrameType, event: str, arg: Any) -> Any:
-        if event == "line":
+        if event == "exception" and isinstance(arg[1], RemoteTimeout):
+            self._delivered = True  # it landed in remote code: tracing goes on
+        elif event == "line":
             self._lines += 1
             if self._lines >= _CLOCK_LINES:
                 self._lines = 0
