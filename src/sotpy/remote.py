@@ -30,7 +30,8 @@ Protocol: JSON lines (UTF-8, one object per ``\\n``-terminated line, at most
      raised; ``more`` when the statement is incomplete (a ``for``'s body follows).
    * ``{"source": S}``: run the complete block ``S`` (several lines) at once; answer
      ``{"output": text, "more": false}``.
-   * ``{"complete": prefix}``: answer ``{"matches": [...]}`` (``rlcompleter``).
+   * ``{"complete": prefix}`` (optionally ``"before"``: the text before the cursor):
+     answer ``{"matches": [...]}`` (:class:`sotpy.shell.Completer`).
    * ``{"reset": true}``: drop a pending incomplete statement; answer ``{"ok": true}``.
 
    A malformed request is answered ``{"error": ...}``; the connection stays usable.
@@ -75,7 +76,6 @@ import ipaddress
 import json
 import logging
 import os
-import rlcompleter
 import secrets
 import socket
 import socketserver
@@ -611,7 +611,9 @@ class _Handler(socketserver.BaseRequestHandler):
             self._send({"ok": True, "banner": owner.banner})
             scope = _GraphScope(owner.exec_timeout, peer)
             console = _Console(owner.namespace, scope)
-            completer = rlcompleter.Completer(owner.namespace)
+            from .shell import Completer  # names inside strings; signals not as calls
+
+            completer = Completer(owner.namespace)
             while True:
                 try:
                     line = reader.readline(MAX_LINE)
@@ -669,9 +671,7 @@ class _Handler(socketserver.BaseRequestHandler):
             return False
         return True
 
-    def _answer(
-        self, msg: dict[str, Any], console: _Console, completer: rlcompleter.Completer
-    ) -> dict[str, Any]:
+    def _answer(self, msg: dict[str, Any], console: _Console, completer: Any) -> dict[str, Any]:
         owner = self.server.owner
         if "line" in msg or "source" in msg:
             text = msg.get("line", msg.get("source"))
@@ -692,16 +692,11 @@ class _Handler(socketserver.BaseRequestHandler):
                         console.runcode(code_obj)
             return {"output": buf.getvalue(), "more": bool(more)}
         if "complete" in msg:
-            prefix = msg["complete"]
-            if not isinstance(prefix, str):
-                return {"error": "'complete' must be a string"}
-            matches: list[str] = []
+            prefix, line = msg["complete"], msg.get("before")
+            if not isinstance(prefix, str) or not isinstance(line, (str, type(None))):
+                return {"error": "'complete' and 'before' must be strings"}
             with pool.lock:
-                for i in range(1000):
-                    m = completer.complete(prefix, i)
-                    if m is None:
-                        break
-                    matches.append(m)
+                matches = completer.completions(prefix, line)  # type: ignore[attr-defined]
             return {"matches": matches}
         if msg.get("reset"):
             console.resetbuffer()
@@ -975,9 +970,13 @@ class RemoteClient:
         """Run a complete block of code remotely; return what it printed."""
         return str(self._request({"source": source}).get("output", ""))
 
-    def complete(self, prefix: str) -> list[str]:
-        """Completions of ``prefix`` in the remote namespace."""
-        return [str(m) for m in self._request({"complete": prefix}).get("matches", [])]
+    def complete(self, prefix: str, line: str | None = None) -> list[str]:
+        """Completions of readline's word ``prefix`` in the remote namespace; ``line``:
+        the text before the cursor, for names inside strings (``signal("right-w``)."""
+        msg: dict[str, Any] = {"complete": prefix}
+        if line is not None:
+            msg["before"] = line
+        return [str(m) for m in self._request(msg).get("matches", [])]
 
     def reset(self) -> None:
         """Drop a pending incomplete statement."""
@@ -1008,7 +1007,8 @@ class RemoteClient:
             def complete(text: str, state: int) -> str | None:
                 if state == 0:
                     try:
-                        cache[text] = self.complete(text)
+                        line = readline.get_line_buffer()[: readline.get_endidx()]
+                        cache[text] = self.complete(text, line)
                     except SotpyError:
                         cache[text] = []
                 m = cache.get(text, [])
