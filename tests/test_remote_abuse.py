@@ -242,6 +242,30 @@ def test_sotpy_connect_reports_a_bad_reply_and_goes_on(monkeypatch, capsys):
     c.close()
 
 
+def test_a_reply_may_take_longer_than_the_connect_timeout(served):
+    server, loop = served
+    with RemoteClient("127.0.0.1", server.address[1], server.token, timeout=0.3) as c:
+        assert c.execute("time.sleep(0.8)\nprint('slept')") == "slept\n"
+        assert c.push("3 * 3")[0] == "9\n"
+    assert loop.fault is None
+
+
+def test_ctrl_c_in_sotpy_connect_while_a_line_runs_closes_cleanly(served, monkeypatch):
+    server, _ = served
+    c = RemoteClient("127.0.0.1", server.address[1], server.token)
+    monkeypatch.setattr(builtins, "input", lambda prompt="": "time.sleep(0.3)")
+
+    def interrupted(limit, deadline=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(c._reader, "readline", interrupted)
+    with pytest.raises(RemoteError, match="interrupted while the remote input ran"):
+        c.interact()
+    assert c.lost
+    with pytest.raises(RemoteError, match="was lost"):
+        c.push("1")
+
+
 # -- 4. the connection file ----------------------------------------------------------------
 def test_a_symlink_planted_at_the_old_temporary_name_is_not_followed(tmp_path):
     victim = tmp_path / "victim"
