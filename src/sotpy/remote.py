@@ -884,13 +884,22 @@ class RemoteClient:
     """A connection to a :class:`RemoteServer`; raises
     :class:`~sotpy.errors.RemoteError` if refused.
 
-    ``RemoteClient(host, port, token)`` or ``RemoteClient.fromFile(path)``. A request
-    that cannot be sent (longer than :data:`MAX_LINE`) or a reply that cannot be read
-    (too long, not JSON) raises ``RemoteError`` and leaves the connection usable; a
-    lost connection raises ``RemoteError`` and sets :attr:`lost`.
+    ``RemoteClient(host, port, token)`` or ``RemoteClient.fromFile(path)``; ``timeout``
+    (s) bounds connecting and the greeting, ``reply_timeout`` (s, None: no bound) the
+    wait for each reply (remote code may run long). A request that cannot be sent
+    (longer than :data:`MAX_LINE`) or a reply that cannot be read (too long, not JSON)
+    raises ``RemoteError`` and leaves the connection usable; a lost connection (or a
+    reply that timed out) raises ``RemoteError`` and sets :attr:`lost`.
     """
 
-    def __init__(self, host: str, port: int, token: str, timeout: float | None = 60.0) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        token: str,
+        timeout: float | None = 60.0,
+        reply_timeout: float | None = None,
+    ) -> None:
         self.lost = False
         try:
             self._sock = socket.create_connection((host, port), timeout=timeout)
@@ -912,13 +921,19 @@ class RemoteClient:
                 f"{hello.get('error', 'no reason given')}"
             )
         self.banner = str(hello.get("banner", ""))
+        self._sock.settimeout(reply_timeout)  # remote code may run long, beside the loop
 
     @classmethod
-    def fromFile(cls, path: str | Path | None = None, timeout: float | None = 60.0) -> RemoteClient:
+    def fromFile(
+        cls,
+        path: str | Path | None = None,
+        timeout: float | None = 60.0,
+        reply_timeout: float | None = None,
+    ) -> RemoteClient:
         """Connect with the address and token of a connection file (default
         :func:`defaultConnectionFile`)."""
         c = readConnectionFile(path)
-        return cls(c["host"], c["port"], c["token"], timeout=timeout)
+        return cls(c["host"], c["port"], c["token"], timeout=timeout, reply_timeout=reply_timeout)
 
     def _lose(self, why: str) -> RemoteError:
         self.lost = True
@@ -996,7 +1011,9 @@ class RemoteClient:
     def interact(self) -> None:
         """A console whose lines run remotely (readline editing and remote tab
         completion when readline is available); Ctrl-D leaves, Ctrl-C drops the
-        statement being typed."""
+        statement being typed. A reply that cannot be read is reported and the console
+        goes on; Ctrl-C while a line runs closes the connection (RemoteError; the line
+        goes on in the server)."""
         try:
             import readline
         except ImportError:  # pragma: no cover - Windows
@@ -1038,6 +1055,11 @@ class RemoteClient:
                 print(f"sotpy connect: {exc}", file=sys.stderr)  # and go on
                 more = False
                 continue
+            except KeyboardInterrupt:  # the reply is still to come: the connection ends
+                raise self._lose(
+                    "interrupted while the remote input ran; it goes on in the server "
+                    "(RemoteServer's exec_timeout bounds inputs); connection closed"
+                ) from None
             sys.stdout.write(str(r.get("output", "")))
             sys.stdout.flush()
             if r.get("exit"):
