@@ -225,3 +225,20 @@ def test_a_meta_task_that_fails_half_built_removes_what_it_created(monkeypatch):
         MetaTaskKine6d("ee", dyn, "ee", "effector_body")
     assert pool.list() == before  # feature, task and gain removed together
     assert not dyn.hasSignal("ee")
+
+
+def test_the_compat_meta_task_that_fails_half_built_removes_what_it_created(monkeypatch):
+    from sotpy.compat._meta import MetaTaskKine6d
+    from sotpy.tasks import FeaturePoint6d
+
+    model = pin.buildSampleModelManipulator()
+    dyn = Dynamic("dyn", model)
+    before = pool.list()
+
+    def failing_frame(self, which):
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(FeaturePoint6d, "frame", failing_frame)  # after setReference
+    with pytest.raises(RuntimeError, match="injected"):
+        MetaTaskKine6d("ee", dyn, "ee", "effector_body")
+    assert pool.list() == before  # the feature, its reference, the task... together

@@ -107,9 +107,9 @@ class MetaTaskKine6d(_native.MetaTaskKine6d):
             self.feature.setReference(self.featureDes)
             self.feature.frame("current")  # SoT's meta-task computes in the current frame
         except BaseException:
-            for e in self.entities():
-                if pool.hasEntity(e.name):
-                    pool.remove(e.name)
+            names = [e.name for e in self.entities() if pool.hasEntity(e.name)]
+            if names:
+                pool.remove(*names)  # together: they use one another
             raise
         self._constructed = True
 
