@@ -242,3 +242,60 @@ def test_the_compat_meta_task_that_fails_half_built_removes_what_it_created(monk
     with pytest.raises(RuntimeError, match="injected"):
         MetaTaskKine6d("ee", dyn, "ee", "effector_body")
     assert pool.list() == before  # the feature, its reference, the task... together
+
+
+class RmFakePublish(Entity):
+    """Stands for ZenohPublish (zenoh is optional): inputs added by add(), a trigger."""
+
+    def add(self, type, name, key, size=None):
+        from sotpy.graph.signal import InputSignal
+        from sotpy.graph.types import type_named
+
+        self.addSignal(InputSignal(self, name, type_named(type)))
+
+    @Output(DOUBLE, timeDependent=True)
+    def trigger(self):
+        return 0.0
+
+
+class RmFakeSubscribe(Entity):
+    """Stands for ZenohSubscribe: outputs added by add()."""
+
+    def add(self, type, name, key, size=None):
+        from sotpy.graph.signal import OutputSignal
+        from sotpy.graph.types import type_named
+
+        out = OutputSignal(self, name, type_named(type))
+        out.setConstant(np.zeros(size or 6))
+        self.addSignal(out)
+
+
+def test_the_zenoh_bridge_takes_its_entities_out_before_removing_them(monkeypatch):
+    import sotpy.bridge.entities as entities
+    from sotpy.bridge.serve import ServeBridge
+    from sotpy.errors import BridgeError
+
+    monkeypatch.setattr(entities, "ZenohPublish", lambda name, session: RmFakePublish(name))
+    monkeypatch.setattr(entities, "ZenohSubscribe", lambda name, session: RmFakeSubscribe(name))
+    model = pin.buildSampleModelManipulator()
+    dev = Device("dev", model)
+    cfg = {
+        "wait": 0.0,
+        "session": None,
+        "path": "bridge.toml",
+        "publish": [{"signal": "dev.state", "key": "k/state"}],
+        "subscribe": [{"signal": "dev.control", "key": "k/control", "size": model.nv}],
+    }
+    before = pool.list()
+    bridge = ServeBridge(cfg, dev)
+    assert dev.control.source is not None and dev.after.list()
+    bridge.close()  # the device's after list and control plug let go first
+    assert pool.list() == before and dev.after.list() == [] and dev.control.source is None
+    # a file refused half way leaves the pool as it was (the BridgeError, not a refusal)
+    cfg["publish"] = [
+        {"signal": "dev.state", "key": "a", "call": "after"},
+        {"signal": "dev.velocity", "key": "b", "call": "before"},
+    ]
+    with pytest.raises(BridgeError, match="the same call and period"):
+        ServeBridge(cfg, dev)
+    assert pool.list() == before

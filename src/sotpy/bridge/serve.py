@@ -168,8 +168,21 @@ class ServeBridge:
         return ok
 
     def close(self) -> None:
-        """Remove the entities (closing the Zenoh session)."""
-        for e in (self.pub, self.sub):
-            if e is not None and pool.hasEntity(e.name):
-                pool.remove(e)
+        """Take the entities out of the graph and remove them (closing the Zenoh
+        session): the publisher's trigger leaves the device's ``before``/``after``
+        lists, the inputs the subscriber fed are unplugged (``pool.remove`` refuses an
+        entity still in use)."""
+        if self.pub is not None:
+            for call in ("before", "after"):
+                calls = getattr(self.device, call, None)
+                if calls is not None:
+                    calls.rmSignal(self.pub.trigger, missing_ok=True)
+        if self.sub is not None:
+            for sig in self.sub.signals():
+                for d in list(sig._dependants):
+                    if isinstance(d, InputSignal) and d.entity is not self.sub:
+                        d.unplug()
+        gone = [e for e in (self.pub, self.sub) if e is not None and pool.hasEntity(e.name)]
+        if gone:
+            pool.remove(*gone)
         self.pub = self.sub = None
