@@ -44,6 +44,7 @@ from .demos import (
     torque_run,
     torque_talos_options,
     torque_talos_run,
+    ui_options,
 )
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
@@ -229,6 +230,7 @@ def _shell_run(args: argparse.Namespace) -> int:
 
     try:
         ns = makeNamespace(args.robot, args.dt)
+        ui = _open_ui(args, ns) if args.ui else None
     except SotpyError as exc:
         print(f"sotpy shell: {exc}", file=sys.stderr)
         return 1
@@ -237,7 +239,19 @@ def _shell_run(args: argparse.Namespace) -> int:
     finally:
         if ns.get("loop") is not None:
             ns["loop"].stop()
+        if ui is not None:
+            ui.close()
     return 0
+
+
+def _open_ui(args: argparse.Namespace, ns: dict[str, Any], token: str | None = None) -> Any:
+    """``--ui``: a dashboard over the namespace's loop, ``ui`` in the namespace."""
+    from .demos import open_dashboard
+
+    ui = open_dashboard(ns["loop"], ns.get("robot"), args, token=token)
+    ns["ui"] = ui
+    print(f"dashboard: {ui.url()}", flush=True)
+    return ui
 
 
 def add_shell(subparsers: Any) -> None:
@@ -256,6 +270,7 @@ def add_shell(subparsers: Any) -> None:
         help="use Python's standard console (default: IPython when installed, "
         "pip install 'sotpy[shell]')",
     )
+    ui_options(p)
     p.set_defaults(func=_shell_run)
 
 
@@ -312,6 +327,12 @@ def _serve_run(args: argparse.Namespace) -> int:
         print(f"sotpy serve: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
         return 1
     loop = ns["loop"]
+    try:  # the same token as the remote interpreter: one secret, in the connection file
+        ui = _open_ui(args, ns, token=server.token) if args.ui else None
+    except SotpyError as exc:
+        server.stop()
+        print(f"sotpy serve: {exc}", file=sys.stderr)
+        return 1
 
     why = ["an error"]
 
@@ -344,6 +365,8 @@ def _serve_run(args: argparse.Namespace) -> int:
     finally:
         server.stop()
         loop.stop()
+        if ui is not None:
+            ui.close()
         print(f"sotpy serve: stopped by {why[0]}; loop statistics:\n{loop.stats()}", flush=True)
     return 0
 
@@ -370,6 +393,7 @@ def add_serve(subparsers: Any) -> None:
     p.add_argument(
         "--zenoh", metavar="PATH", help="publish/subscribe signals over Zenoh (docs/zenoh.md)"
     )
+    ui_options(p)
     p.set_defaults(func=_serve_run)
 
 

@@ -463,10 +463,10 @@ class Dashboard:
             reply = {"ok": False, "error": str(exc), "malformed": True}
         except SotpyError as exc:
             log.info("dashboard: edit refused: %s", exc)
-            reply = {"ok": False, "error": str(exc), "type": type(exc).__name__}
+            reply = {"ok": False, "error": str(exc), "errorType": type(exc).__name__}
         except Exception as exc:  # anything else a command raised: shown, not fatal
             log.info("dashboard: edit failed: %r", exc)
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "type": type(exc).__name__}
+            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "errorType": type(exc).__name__}
         reply = {"type": "reply", "id": rid if isinstance(rid, (int, str)) else None, **reply}
         with contextlib.suppress(Exception):
             client.ws.write_message(json.dumps(reply))

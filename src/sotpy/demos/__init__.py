@@ -56,6 +56,7 @@ __all__ = [
     "torque_run",
     "torque_talos_options",
     "torque_talos_run",
+    "ui_options",
     "viewer_options",
 ]
 
@@ -137,6 +138,89 @@ def viewer_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
+    """Add ``--ui`` (the live dashboard, :class:`sotpy.dashboard.Dashboard`),
+    ``--ui-port P``, ``--ui-host H`` and ``--ui-remote`` (required with a host that is
+    not loopback)."""
+    g = parser.add_argument_group("dashboard (docs/dashboard.md)")
+    what = (
+        "build the demo's graph and serve it on a live web page, the loop paused at tick 1: "
+        "start it, plot and edit from the page; Ctrl-C (or --hold S) ends"
+        if demo
+        else "serve a live web page over the graph and the loop (prints its address, with "
+        "the token)"
+    )
+    g.add_argument("--ui", action="store_true", help=what)
+    g.add_argument("--ui-port", type=int, default=0, metavar="P", help="its port (0: a free one)")
+    g.add_argument(
+        "--ui-host", default="127.0.0.1", metavar="H", help="its address (default 127.0.0.1)"
+    )
+    g.add_argument(
+        "--ui-remote",
+        action="store_true",
+        help="allow --ui-host to be an address other than loopback (the page is then "
+        "reachable from the network, over plain HTTP: a warning says so)",
+    )
+
+
+def open_dashboard(loop: Any, robot: Any, args: argparse.Namespace, token: str | None = None) -> Any:
+    """The :class:`~sotpy.dashboard.Dashboard` of ``loop`` that the ``--ui`` options of
+    ``args`` ask for (``robot``: its ``model`` and ``visual_model``, for the 3-D view)."""
+    from ..dashboard import Dashboard
+
+    return Dashboard(
+        loop,
+        robot=robot,
+        host=args.ui_host,
+        port=args.ui_port,
+        allowRemote=args.ui_remote,
+        token=token,
+    )
+
+
+def _demo_ui(args: argparse.Namespace, name: str, build: Callable[[], dict[str, Any]]) -> int:
+    """``sotpy demo NAME --ui``: ``build()`` makes the demo's graph (its story run for one
+    tick), then a :class:`~sotpy.loop.ControlLoop` (paused) and a dashboard serve it until
+    Ctrl-C, or ``--hold S`` seconds."""
+    import time
+    import types
+
+    from ..dynamics.robot import load_model
+    from ..errors import SotpyError
+    from ..graph import pool
+    from ..loop import ControlLoop
+
+    try:
+        result = build()
+        device = pool.getEntity(f"{result['prefix']}_device")
+        model, visual, _ = load_model(args.robot)
+        robot = types.SimpleNamespace(model=model, visual_model=visual)
+        loop = ControlLoop(f"{result['prefix']}_loop", device, args.dt)
+        ui = open_dashboard(loop, robot, args)
+    except SotpyError as exc:
+        print(f"sotpy demo {name}: {exc}", file=sys.stderr)
+        return 1
+    print(
+        f"sotpy demo {name}: the graph is built and the loop {loop.name} paused at tick "
+        f"{device.state.time}; open the dashboard:\n  {ui.url()}\nStart the loop there (or "
+        "Step), click a signal's 'plot', edit a gain. Ctrl-C ends.",
+        flush=True,
+    )
+    try:
+        if args.hold is None:
+            while True:
+                time.sleep(3600)
+        else:
+            time.sleep(args.hold)
+    except KeyboardInterrupt:
+        print("", flush=True)
+    finally:
+        loop.stop()
+        ui.close()
+        print(f"sotpy demo {name}: stopped; loop statistics:\n{loop.stats()}", flush=True)
+    return 0
+
+
 #: Defaults of ``sotpy demo robot``: robot name, simulated time (s), time step (s).
 ROBOT_DEMO_DEFAULTS: dict[str, Any] = {"robot": "talos", "duration": 3.0, "dt": 1e-3}
 
@@ -183,6 +267,7 @@ def robot_options(parser: argparse.ArgumentParser) -> None:
         f"(default {d['robot']})",
     )
     viewer_options(parser)
+    ui_options(parser, demo=True)
     parser.add_argument(
         "--duration",
         type=positive_float,
@@ -208,6 +293,12 @@ def robot_run(args: argparse.Namespace) -> int:
     from ..errors import SotpyError
     from .robot_tour import run_robot_tour
 
+    if args.ui:
+        return _demo_ui(
+            args,
+            "robot",
+            lambda: run_robot_tour(robot=args.robot, duration=args.dt, dt=args.dt, quiet=True),
+        )
     try:
         result = run_robot_tour(
             robot=args.robot,
@@ -275,6 +366,7 @@ def reach_options(parser: argparse.ArgumentParser, robot: str) -> None:
         "--plot", metavar="PATH", help="save the task errors and the CoM path (PNG)"
     )
     viewer_options(parser)
+    ui_options(parser, demo=True)
     parser.add_argument(
         "--target-offset",
         type=finite_float,
@@ -309,6 +401,20 @@ def reach_run(args: argparse.Namespace) -> int:
     from .reach import run_reach
 
     name = f"sotpy demo {args.robot}"
+    if args.ui:
+        return _demo_ui(
+            args,
+            args.robot,
+            lambda: run_reach(
+                robot=args.robot,
+                duration=args.dt,
+                dt=args.dt,
+                target_offset=args.target_offset,
+                quiet=True,
+                margin=args.margin,
+                damping=args.damping,
+            ),
+        )
     try:
         result = run_reach(
             robot=args.robot,

@@ -1,0 +1,317 @@
+"""The dashboard without a browser: the token rule over HTTP and the websocket, the
+refusals, the recorder against a real Tracer's files, the edits, the status."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sotpy.dashboard import Dashboard, applyEdit, graphSnapshot, isLoopback, status
+from sotpy.dashboard.model import EditError, signalList
+from sotpy.dynamics import load_robot
+from sotpy.errors import SignalTypeError, SotpyError
+from sotpy.graph import Tracer, plug, pool
+from sotpy.loop import ControlLoop
+from sotpy.solvers import SOT
+from sotpy.tasks import FeaturePose, Task
+
+DT = 0.01
+
+
+def ur5_reach(forget: bool = False):
+    """The debugging tutorial's UR5 graph (with its two forgotten lines when ``forget``)."""
+    robot = load_robot("ur5")
+    dyn = robot.dynamic
+    feature = FeaturePose("feature_ee")
+    plug(dyn.signal("end-effector"), feature.position)
+    if not forget:
+        plug(dyn.signal("Jend-effector"), feature.Jq)
+    feature.reference.value = pin.SE3(np.eye(3), np.array([0.3, 0.2, 0.4]))
+    feature.selec.value = "111000"
+    task = Task("task_ee")
+    task.add(feature)
+    task.controlGain.value = 2.0
+    sot = SOT("sot", dyn)
+    if not forget:
+        sot.dt.value = DT
+    sot.push(task)
+    plug(sot.control, robot.device.control)
+    return robot, feature, task, sot
+
+
+def _get(url: str, cookie: str | None = None) -> tuple[int, bytes, dict]:
+    req = urllib.request.Request(url)
+    if cookie:
+        req.add_header("Cookie", cookie)
+
+    class NoRedirect(urllib.request.HTTPRedirectHandler):
+        def redirect_request(self, *args, **kwargs):
+            return None
+
+    opener = urllib.request.build_opener(NoRedirect)
+    try:
+        with opener.open(req, timeout=10) as r:
+            return r.status, r.read(), dict(r.headers)
+    except urllib.error.HTTPError as e:
+        return e.code, e.read(), dict(e.headers)
+
+
+def test_token_rule_no_token_no_page_no_data(caplog):
+    robot, _, task, _ = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    with Dashboard(loop) as ui, caplog.at_level(logging.WARNING, "sotpy.dashboard"):
+        base = f"http://127.0.0.1:{ui.port}"
+        for path in ("/", "/static/dashboard.js", "/record.npz", "/?token=wrong"):
+            code, body, _ = _get(base + path)
+            assert code == 403, path
+            assert ui.token.encode() not in body
+        assert ui.refused == 4
+        assert sum("refused" in r.message for r in caplog.records) == 4
+        code, _, headers = _get(ui.url())
+        assert code == 302 and headers["Location"] == "/"  # the token leaves the address
+        cookie = headers["Set-Cookie"].split(";")[0]
+        assert "httponly" in headers["Set-Cookie"].lower()
+        assert "samesite=strict" in headers["Set-Cookie"].lower()
+        code, body, _ = _get(base + "/", cookie)
+        assert code == 200 and b"dashboard.js" in body
+        code, body, _ = _get(base + "/static/vendor/uPlot.iife.min.js", cookie)
+        assert code == 200 and b"uPlot" in body
+        # the websocket: no token, or another site's origin, is refused
+        import tornado.httpclient
+        import tornado.websocket
+
+        async def ws(headers):
+            req = tornado.httpclient.HTTPRequest(f"ws://127.0.0.1:{ui.port}/ws", headers=headers)
+            conn = await tornado.websocket.websocket_connect(req)
+            conn.close()
+
+        with pytest.raises(tornado.httpclient.HTTPClientError) as no_token:
+            asyncio.run(ws({}))
+        assert no_token.value.code == 403
+        with pytest.raises(tornado.httpclient.HTTPClientError) as bad_origin:
+            asyncio.run(ws({"Cookie": cookie, "Origin": "http://evil.example"}))
+        assert bad_origin.value.code == 403
+        assert ui.refused == 6
+        ui.plot(task.error.path)
+        robot.device.increment(DT)
+        code, body, _ = _get(base + "/record.npz", cookie)
+        assert code == 200 and body[:2] == b"PK"  # an npz (a zip)
+
+
+def test_loopback_only_unless_asked():
+    assert isLoopback("127.0.0.1") and isLoopback("::1") and isLoopback("localhost")
+    assert not isLoopback("0.0.0.0") and not isLoopback("192.168.1.4")
+    with pytest.raises(SotpyError, match="not a loopback address.*allowRemote"):
+        Dashboard(None, host="0.0.0.0")
+
+
+def test_recorder_writes_the_tracers_files(tmp_path):
+    robot, feature, task, sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    tracer = Tracer("tracer")
+    paths = [task.error.path, sot.control.path, robot.device.state.path]
+    for p in paths:
+        tracer.add(p)
+    tracer.setTimeStep(DT)
+    tracer.start()
+    robot.device.after.addSignal(tracer.trigger)
+    with Dashboard(loop, seconds=1.0) as ui:
+        ui.plot(*paths)
+        loop.step(40)
+        ours, theirs = ui.data(), tracer.data()
+        assert len(ours["tick"]) == 40
+        for key in ("time", "tick", *paths):
+            np.testing.assert_array_equal(ours[key], theirs[key])
+        ui.save(tmp_path / "ours.csv")
+        tracer.dump(str(tmp_path / "theirs.csv"))
+        assert (tmp_path / "ours.csv").read_bytes() == (tmp_path / "theirs.csv").read_bytes()
+        ui.saveFiles(tmp_path / "ours", "dg_", ".dat")
+        tracer.open(str(tmp_path / "theirs"), "dg_", ".dat")
+        tracer.dump()
+        for name in ("error", "control", "state"):
+            mine = (tmp_path / "ours" / f"dg_{name}.dat").read_bytes()
+            assert mine == (tmp_path / "theirs" / f"dg_{name}.dat").read_bytes()
+            assert mine.count(b"\n") == 40
+        ui.save(tmp_path / "ours.npz")
+        from sotpy.plotting import recording  # the tracer's reader
+
+        back = recording(tmp_path / "ours.npz")
+        np.testing.assert_array_equal(back[task.error.path], theirs[task.error.path])
+
+
+def test_ring_is_bounded_and_keeps_the_newest_rows():
+    robot, _, task, _ = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    with Dashboard(loop, seconds=0.1) as ui:  # 10 rows
+        ui.plot(task.error.path)
+        errors = []
+        for _ in range(25):
+            loop.step(1)
+            errors.append(task.error(robot.device.state.time).copy())
+        data = ui.data()
+        n = len(data["tick"])
+        assert n == ui.recorder.size - 1 == 9
+        np.testing.assert_array_equal(data["tick"], np.arange(26 - n, 26))
+        np.testing.assert_array_equal(data[task.error.path], np.array(errors[-n:]))
+
+
+def test_a_plot_that_raises_stops_alone_and_the_loop_goes_on(caplog):
+    robot, feature, task, sot = ur5_reach()
+    loose = FeaturePose("loose")  # its position is unplugged: reading its error raises
+    loop = ControlLoop("loop", robot.device, DT)
+    with Dashboard(loop) as ui, caplog.at_level(logging.WARNING, "sotpy.dashboard"):
+        ui.plot(task.error.path, loose.error.path)
+        loop.step(5)
+        assert loop.fault is None and loop.ticks == 5
+        errors = ui.recorder.errors()
+        assert list(errors) == [loose.error.path]
+        assert "UnpluggedError" in errors[loose.error.path]
+        assert "position" in errors[loose.error.path]
+        assert ui.data()[task.error.path].shape == (5, 3)  # selec "111000"
+        assert any("stopped recording" in r.message for r in caplog.records)
+
+
+def test_edits_go_through_the_lock_and_refusals_change_nothing():
+    robot, feature, task, sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    assert applyEdit({"kind": "set", "signal": "task_ee.controlGain", "text": "5"})["ok"]
+    assert task.controlGain.value == 5.0
+    with pytest.raises(SignalTypeError, match=r"Task\(task_ee\)::input\(double\)::controlGain"):
+        applyEdit({"kind": "set", "signal": "task_ee.controlGain", "text": "[1, 2]"})
+    assert task.controlGain.value == 5.0
+    with pytest.raises(SotpyError, match="is plugged to.*unplug it from the shell"):
+        applyEdit({"kind": "set", "signal": "feature_ee.position", "value": 1.0})
+    assert feature.position.source is not None
+    with pytest.raises(SotpyError, match="has no command 'nope'"):
+        applyEdit({"kind": "call", "entity": "sot", "command": "nope"})
+    applyEdit({"kind": "call", "entity": "sot", "command": "remove", "args": ["task_ee"]})
+    assert sot.list() == []
+    with pytest.raises(SotpyError, match="not in the stack|is not"):
+        applyEdit({"kind": "call", "entity": "sot", "command": "remove", "args": ["task_ee"]})
+    applyEdit({"kind": "call", "entity": "sot", "command": "push", "args": ["task_ee"]})
+    assert sot.list() == ["task_ee"]
+    applyEdit({"kind": "call", "entity": "loop", "command": "step", "args": [3]})
+    assert loop.ticks == 3
+    for bad in ([], {"kind": 3}, {"kind": "set"}, {"kind": "call", "entity": "sot"},
+                {"kind": "call", "entity": "sot", "command": "push", "args": "x"},
+                {"kind": "teleport"}):  # fmt: skip
+        with pytest.raises(EditError):
+            applyEdit(bad)
+
+
+def test_graph_snapshot_and_status_show_what_is_missing_and_fresh():
+    robot, feature, task, sot = ur5_reach(forget=True)
+    g = graphSnapshot(robot.device)
+    assert g["unplugged"] == ["feature_ee.Jq", "sot.dt"]
+    names = {e["name"]: e for e in g["entities"]}
+    assert names["sot"]["kind"] == "sot" and names["task_ee"]["kind"] == "task"
+    plugged = [s for e in pool.entities() for s in e.signals() if getattr(s, "source", None)]
+    assert len(g["edges"]) == len(plugged)
+    assert {"from": "ur5_dynamic.end-effector", "to": "feature_ee.position"} in g["edges"]
+    assert [(c["owner"], c["members"]) for c in g["clusters"]] == [("sot", ["task_ee"])]
+    plug(robot.dynamic.signal("Jend-effector"), feature.Jq)
+    sot.dt.value = DT
+    loop = ControlLoop("loop", robot.device, DT)
+    loop.step(2)
+    sigs = signalList()
+    st = status(loop, sigs)
+    fresh = {sigs[i].path for i in st["fresh"]}
+    assert {"sot.control", "task_ee.error", "ur5_device.state"} <= fresh
+    assert "feature_ee.errordot" not in fresh  # nobody read it at the last tick
+    (level0, level1) = st["sots"][0]["levels"]
+    assert level0["task"] == "joint limits" and level0["kind"] == "hard"
+    assert level1["task"] == "task_ee" and level1["rows"] == 3 and level1["gain"] == 2.0
+    np.testing.assert_allclose(level1["residual"], sot.lastResult.residuals[1])
+    assert level1["rank"] == sot.lastResult.ranks[1] == 3
+    assert st["loop"]["ticks"] == 2 and not st["loop"]["running"]
+    sot.lastResult = object()  # a result without any of the attributes: the tasks alone
+    (level,) = status(loop, sigs)["sots"][0]["levels"]
+    assert level["task"] == "task_ee" and level["residual"] is None and level["rank"] is None
+    assert "active" not in level
+
+    class Result:  # the solver being rewritten reports active rows per level
+        residuals = np.array([0.0, 1e-3])
+        ranks = np.array([0, 3])
+        active = [np.array([True, False, True]), np.array([], dtype=int)]
+        status = "optimal"
+
+    sot.lastResult = Result()
+    st = status(loop, sigs)["sots"][0]
+    assert st["levels"][0]["active"] == 2 and st["levels"][0]["activeRows"] == [0, 2]
+    assert st["levels"][1]["active"] == 0 and st["status"] == "optimal"
+
+
+def test_controller_tasks_weights_and_ramps():
+    from sotpy.solvers.controller import Controller
+
+    robot = load_robot("panda")
+    ctrl = Controller("ctrl", robot.dynamic)
+    ctrl.addJointTask("posture", 1e-3, 0)
+    ctrl.addTorqueLimits("torque")
+    ctrl.setRampDuration("posture", 0.5)
+    ctrl.activateTasksAndConstraints()
+    st = status(None, [])["controllers"][0]
+    (posture,) = st["tasks"]
+    assert posture["name"] == "posture" and posture["weight"] == 1e-3
+    assert posture["state"] == "activating" and posture["ramp"] == 0.0
+    assert posture["rampDuration"] == 0.5
+    assert st["constraints"][0]["name"] == "torque"
+    applyEdit({"kind": "call", "entity": "ctrl", "command": "setTaskWeight", "args": ["posture", 0.1]})
+    assert status(None, [])["controllers"][0]["tasks"][0]["weight"] == 0.1
+
+
+def test_malformed_websocket_requests_are_refused_logged_and_the_loop_runs(caplog):
+    import tornado.httpclient
+    import tornado.websocket
+
+    robot, feature, task, sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    with Dashboard(loop) as ui, caplog.at_level(logging.INFO, "sotpy.dashboard"):
+        _, _, headers = _get(ui.url())
+        cookie = headers["Set-Cookie"].split(";")[0]
+        loop.start()
+
+        async def session():
+            req = tornado.httpclient.HTTPRequest(
+                f"ws://127.0.0.1:{ui.port}/ws",
+                headers={"Cookie": cookie, "Origin": f"http://127.0.0.1:{ui.port}"},
+            )
+            conn = await tornado.websocket.websocket_connect(req)
+            replies = []
+            for text in ("not json", "[1, 2]", json.dumps({"id": 7, "kind": "teleport"}),
+                         json.dumps({"id": 8, "kind": "series", "series": "x"}),
+                         json.dumps({"id": 9, "kind": "set", "signal": "task_ee.controlGain",
+                                     "text": "abc"}),
+                         json.dumps({"id": 10, "kind": "set", "signal": "task_ee.controlGain",
+                                     "text": "3"})):  # fmt: skip
+                await conn.write_message(text)
+                while True:
+                    msg = await asyncio.wait_for(conn.read_message(), 10)
+                    if isinstance(msg, str) and json.loads(msg)["type"] == "reply":
+                        replies.append(json.loads(msg))
+                        break
+            await conn.write_message(b"\x00" * 10)  # bytes: refused too
+            conn.close()
+            return replies
+
+        replies = asyncio.run(session())
+        ticks = loop.ticks
+        time.sleep(0.2)
+        assert loop.running and loop.ticks > ticks and loop.fault is None
+        loop.stop()
+    assert [r["ok"] for r in replies] == [False] * 5 + [True]
+    assert all(r.get("malformed") for r in replies[:4])
+    assert [r["id"] for r in replies[2:]] == [7, 8, 9, 10]
+    assert "cannot read 'abc' as a value" in replies[4]["error"]
+    assert "controlGain" in replies[4]["error"]
+    assert task.controlGain.value == 3.0
+    assert ui.refused >= 4
+    assert sum("malformed" in r.message for r in caplog.records) >= 4
