@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SotpyError
-from ..graph import INT, Entity, OutputSignal, checkPlugged
+from ..graph import INT, Entity, OutputSignal, Plan, checkPlugged
 from ..graph.pool import pool
 from ..graph.signal import CONSTANT, FUNCTION, PLUGGED, UNSET, InputSignal, Signal
 
@@ -304,13 +304,16 @@ def _entity(name: str) -> Any:
     return pool._entities.get(name)
 
 
-def status(loop: Any, signals: list[Signal], lastTick: int | None = None) -> dict[str, Any]:
+def status(
+    loop: Any, signals: list[Signal], lastTick: int | None = None, stats: Any = None
+) -> dict[str, Any]:
     """The live state, without the lock: the loop's (running, tick, statistics, fault),
     which of ``signals`` were computed at the last tick or since (``fresh``: their
     indices), the SOTs' levels and the torque controllers' tasks.
 
     The last tick is the one whose control the device applied: its state's tick minus
-    one (``lastTick`` overrides it)."""
+    one (``lastTick`` overrides it). ``stats``: the loop's ``LoopStats`` if already
+    read (default: ``loop.stats()``)."""
     device = getattr(loop, "device", None)
     state = getattr(device, "state", None)
     tick = state.time if isinstance(state, Signal) else pool.time
@@ -324,7 +327,7 @@ def status(loop: Any, signals: list[Signal], lastTick: int | None = None) -> dic
         "lastTick": last,
     }
     if loop is not None:
-        stats = loop.stats()
+        stats = loop.stats() if stats is None else stats
         out["loop"] = {
             "name": loop.name,
             "running": bool(loop.running),
@@ -494,6 +497,7 @@ class Recorder:
         self._count = 0
         self._columns: dict[str, _Column] = {}
         self._active: tuple[_Column, ...] = ()
+        self._plan: Plan | None = None
         self.hook = OutputSignal(
             _Owner(name), "record", INT, self._record, withTime=True, timeDependent=True,
             doc="rows recorded by the dashboard",
@@ -504,6 +508,12 @@ class Recorder:
     def _record(self, t: int) -> int:
         i = self._count % self.size
         self._ticks[i] = t
+        plan = self._plan
+        if plan is not None:
+            try:  # the recorded signals, with the tick's compiled steps (fused rows)
+                plan.run(t)
+            except Exception:  # the reads below find the signal that raises
+                self._plan = None
         for c in self._active:
             data = c.data
             if c.error is not None:
@@ -521,11 +531,22 @@ class Recorder:
                 data[i] = a
             except Exception as exc:  # never stop the tick for a plot
                 c.error = f"{type(exc).__name__}: {exc}"
+                self._replan()
                 log.warning("dashboard: stopped recording %s at tick %d: %s", c.signal.name, t, c.error)
                 if data is not None:
                     data[i] = np.nan
+        if self._plan is None and self._active:
+            self._replan()
         self._count += 1  # publishes the row
         return self._count
+
+    def _replan(self) -> None:
+        """A compiled :class:`~sotpy.graph.Plan` of the signals still recorded: the
+        values of the next tick are computed by the same kind of steps as the tick's
+        own plan (the SOT's fused rows), and a value the next tick needs is then not
+        computed again (it is up to date at that tick)."""
+        sinks = [c.signal for c in self._active if c.error is None]
+        self._plan = Plan(sinks) if sinks else None
 
     # -- configuration (server threads, holding pool.lock) ------------------------
     def attach(self) -> None:
@@ -558,6 +579,7 @@ class Recorder:
             c.first = self._count
             self._columns[path] = c
             self._active = tuple(self._columns.values())
+            self._replan()
 
     def remove(self, path: str) -> None:
         """Stop recording ``path`` and forget its rows."""
@@ -565,6 +587,7 @@ class Recorder:
             if self._columns.pop(path, None) is None:
                 raise SotpyError(f"dashboard: {path!r} is not recorded")
             self._active = tuple(self._columns.values())
+            self._replan()
 
     def paths(self) -> list[str]:
         """The recorded signals' paths, in the order they were added."""

@@ -67,7 +67,10 @@ STATIC = Path(__file__).with_name("static")
 #: Frames a second sent to each page (the plots' refresh rate).
 DEFAULT_RATE = 30.0
 #: How often the status (loop, stack, fresh signals) is sent, in s.
-STATUS_PERIOD = 0.2
+STATUS_PERIOD = 0.25
+#: Python's switch interval while a dashboard serves (s; Python's default is 5 ms): the
+#: longest a tick that wants the GIL back waits for the server's thread to yield it.
+SWITCH_INTERVAL = 0.0005
 #: The largest message a page may send (bytes); a longer one closes its connection.
 MAX_MESSAGE = 64 * 1024
 _COOKIE = "sotpy_dashboard"
@@ -167,6 +170,8 @@ class Dashboard:
         self._refused = 0
         self._closed = False
         self._graphPending = False
+        self._stats: Any = None
+        self._statsAt = 0.0
         self._work = ThreadPoolExecutor(1, thread_name_prefix=f"{who} edits")
         self._graphLock = threading.Lock()
         self._ready = threading.Event()
@@ -186,6 +191,7 @@ class Dashboard:
         self.port = int(self._sock.getsockname()[1])
         if self.recorder is not None:
             self.recorder.attach()
+        _switchInterval(+1)
         self._thread = threading.Thread(target=self._serve, name=f"{who} server", daemon=True)
         self._thread.start()
         if not self._ready.wait(20.0) or self._error is not None:
@@ -244,6 +250,7 @@ class Dashboard:
             self._thread.join(10.0)
         with contextlib.suppress(OSError):
             self._sock.close()
+        _switchInterval(-1)
         if self.recorder is not None:
             with contextlib.suppress(Exception):
                 self.recorder.detach()
@@ -292,7 +299,10 @@ class Dashboard:
 
     def _statusNow(self) -> dict[str, Any]:
         signals = self._signals
-        st = status(self.loop, signals)
+        now = time.monotonic()
+        if self.loop is not None and (self._stats is None or now - self._statsAt > 1.0):
+            self._stats, self._statsAt = self.loop.stats(), now  # percentiles: once a second
+        st = status(self.loop, signals, stats=self._stats)
         rec = self.recorder
         if rec is not None:
             st["recording"] = {
@@ -529,6 +539,29 @@ class Dashboard:
         viewer.frameRobot(self.device.state.value)
         self.viewer = viewer
         return {"ok": True, "result": viewer.url()}
+
+
+_SWITCH = {"count": 0, "saved": None}
+_SWITCH_LOCK = threading.Lock()
+
+
+def _switchInterval(d: int) -> None:
+    """While a dashboard serves, Python's switch interval is :data:`SWITCH_INTERVAL`
+    (restored when the last one closes). The server's thread shares the GIL with the
+    loop's: with Python's 5 ms, a tick that released the GIL (in NumPy, BLAS) could wait
+    up to 5 ms for the server to give it back; with 0.5 ms, 0.5 ms at most."""
+    import sys
+
+    with _SWITCH_LOCK:
+        if d > 0:
+            if _SWITCH["count"] == 0:
+                _SWITCH["saved"] = sys.getswitchinterval()
+                sys.setswitchinterval(min(SWITCH_INTERVAL, _SWITCH["saved"]))
+            _SWITCH["count"] += 1
+        else:
+            _SWITCH["count"] -= 1
+            if _SWITCH["count"] == 0 and _SWITCH["saved"] is not None:
+                sys.setswitchinterval(_SWITCH["saved"])
 
 
 def _frame(rec: Recorder, c: _Client) -> tuple[bytes, int]:
