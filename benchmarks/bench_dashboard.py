@@ -10,6 +10,14 @@ run alternates two phases of ``--seconds`` each, ``--rounds`` times, in one proc
   posture task's error, the CoM, the device's state: 3 components each) refreshed at 30
   frames/s; the phase is measured once the page receives frames.
 
+* **browser elsewhere** (a control, to tell the browser's CPU from the dashboard's): the
+  loop alone, while another process serves a UR5 loop's dashboard to the same headless
+  Chromium page with 5 plots: what the browser alone takes from a 2-core machine.
+
+* **client**: the dashboard on the loop, its 5 plots read by a websocket client in
+  another process that renders nothing (the page's traffic without the browser's CPU):
+  the dashboard's own cost in the loop's process.
+
 Reported: the tick time (``device.increment``, which includes the dashboard's recorder:
 it runs in the tick) median and p99 of each phase, pooled over the rounds, and their
 ratios with over without; the frames the page received per second and those skipped.
@@ -55,6 +63,111 @@ def _phase(loop, seconds: float) -> np.ndarray:
     return _ticks(loop)
 
 
+_ELSEWHERE = """
+import sys, time
+sys.path.insert(0, {tests!r})
+from test_dashboard import DT, ur5_reach
+from sotpy.dashboard import Dashboard
+from sotpy.loop import ControlLoop
+robot, feature, task, sot = ur5_reach()
+loop = ControlLoop("loop", robot.device, 0.001)
+ui = Dashboard(loop)
+print(ui.url(), flush=True)
+loop.start()
+sys.stdin.read()
+"""
+
+
+_CLIENT = """
+import asyncio, json, sys, urllib.request, urllib.error
+import tornado.httpclient, tornado.websocket
+url, port, series = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+class NoRedirect(urllib.request.HTTPRedirectHandler):
+    def redirect_request(self, *a, **k):
+        return None
+try:
+    urllib.request.build_opener(NoRedirect).open(url)
+except urllib.error.HTTPError as e:
+    cookie = e.headers["Set-Cookie"].split(";")[0]
+async def main():
+    req = tornado.httpclient.HTTPRequest(f"ws://127.0.0.1:{port}/ws",
+        headers={"Cookie": cookie, "Origin": f"http://127.0.0.1:{port}"})
+    ws = await tornado.websocket.websocket_connect(req)
+    for i, (path, comps) in enumerate(series):
+        await ws.write_message(json.dumps({"id": i, "kind": "plot", "signal": path}))
+    await ws.write_message(json.dumps({"id": 99, "kind": "series",
+        "series": [[i, p, c] for i, (p, c) in enumerate(series)]}))
+    n = 0
+    while True:
+        m = await ws.read_message()
+        if m is None:
+            break
+        if isinstance(m, bytes):
+            n += 1
+            if n == 10:
+                print("streaming", flush=True)
+asyncio.run(main())
+"""
+
+
+def _client(loop, seconds: float, p: str) -> tuple[np.ndarray, float]:
+    """The loop with the dashboard, its 5 plots read by a client in another process."""
+    import json
+    import subprocess
+
+    from sotpy.dashboard import Dashboard
+
+    ui = Dashboard(loop, seconds=5.0)
+    series = [(sig.format(p=p), comps) for sig, comps in PLOTS]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _CLIENT, ui.url(), str(ui.port), json.dumps(series)],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        loop.start()
+        assert proc.stdout.readline().strip() == "streaming"
+        loop.stop()
+        f0 = sum(f for f, _ in ui.frameCounts())
+        t0 = time.monotonic()
+        ticks = _phase(loop, seconds)
+        rate = (sum(f for f, _ in ui.frameCounts()) - f0) / (time.monotonic() - t0)
+        return ticks, rate
+    finally:
+        proc.kill()
+        proc.wait()
+        ui.close()
+
+
+def _elsewhere(loop, seconds: float) -> np.ndarray:
+    """The loop alone while another process's dashboard feeds the browser 5 plots."""
+    import subprocess
+    from pathlib import Path
+
+    from sotpy.dashboard.browser import HeadlessPage
+
+    tests = str(Path(__file__).resolve().parents[1] / "tests")
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _ELSEWHERE.format(tests=tests)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        url = proc.stdout.readline().strip()
+        with HeadlessPage(url, 1600, 1000) as page:
+            page.waitFor("document.querySelectorAll('#graph .node').length > 0", 60)
+            for k in range(5):
+                comps = [k % 4, k % 4 + 1, k % 4 + 2]
+                page.evaluate(
+                    "(() => { const q = newPlot(); "
+                    f"addSeries('ur5_device.state', {comps}, q); }})()"
+                )
+            page.waitFor("sotpyDashboard.frames > 10", 30)
+            return _phase(loop, seconds)
+    finally:
+        proc.stdin.close()
+        proc.kill()
+        proc.wait()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each phase, s")
@@ -74,8 +187,12 @@ def main() -> int:
     device = pool.getEntity(f"{p}_device")
     loop = ControlLoop("bench_loop", device, 0.001)
     loop.step(200)  # warm: plans compiled, caches filled
-    without, with_, frames = [], [], []
+    without, with_, frames, elsewhere, client, rates = [], [], [], [], [], []
     for r in range(args.rounds):
+        elsewhere.append(_elsewhere(loop, args.seconds))
+        ticks, rate = _client(loop, args.seconds, p)
+        client.append(ticks)
+        rates.append(rate)
         without.append(_phase(loop, args.seconds))
         ui = Dashboard(loop, seconds=5.0)
         try:
@@ -83,8 +200,12 @@ def main() -> int:
                 page.waitFor("document.querySelectorAll('#graph .node').length > 0", 60)
                 for sig, comps in PLOTS:
                     path = sig.format(p=p)
-                    page.evaluate(f"(() => {{ const q = newPlot(); addSeries({path!r}, {comps}, q); }})()")
-                page.waitFor(f"sotpyDashboard.plots.filter(q => q.series.length).length == {len(PLOTS)}", 30)
+                    page.evaluate(
+                        f"(() => {{ const q = newPlot(); addSeries({path!r}, {comps}, q); }})()"
+                    )
+                page.waitFor(
+                    f"sotpyDashboard.plots.filter(q => q.series.length).length == {len(PLOTS)}", 30
+                )
                 loop.start()
                 page.waitFor("sotpyDashboard.frames > 10", 30)
                 loop.stop()
@@ -100,7 +221,7 @@ def main() -> int:
         finally:
             ui.close()
         print(f"round {r + 1}/{args.rounds} done", flush=True)
-    a, b = np.concatenate(without), np.concatenate(with_)
+    a, b, c = np.concatenate(without), np.concatenate(with_), np.concatenate(elsewhere)
     med_a, med_b = np.median(a), np.median(b)
     p99_a, p99_b = np.percentile(a, 99), np.percentile(b, 99)
     print(machine_line(f"numpy {np.__version__}"))
@@ -111,8 +232,20 @@ def main() -> int:
     print(f"{'':28s} {'median':>10s} {'p99':>10s}")
     print(f"{'without the dashboard':28s} {med_a * 1e6:8.1f}us {p99_a * 1e6:8.1f}us")
     print(f"{'with the page, 5 plots':28s} {med_b * 1e6:8.1f}us {p99_b * 1e6:8.1f}us")
+    print(f"{'ratio (target 1.05 / 1.10)':28s} {med_b / med_a:10.3f} {p99_b / p99_a:10.3f}")
+    med_c, p99_c = np.median(c), np.percentile(c, 99)
+    print(f"{'browser elsewhere (control)':28s} {med_c * 1e6:8.1f}us {p99_c * 1e6:8.1f}us")
+    print(f"{'  ratio to without':28s} {med_c / med_a:10.3f} {p99_c / p99_a:10.3f}")
+    print(f"{'with the page / elsewhere':28s} {med_b / med_c:10.3f} {p99_b / p99_c:10.3f}")
+    d = np.concatenate(client)
+    med_d, p99_d = np.median(d), np.percentile(d, 99)
+    print(f"{'client in another process':28s} {med_d * 1e6:8.1f}us {p99_d * 1e6:8.1f}us")
+    print(f"{'  ratio to without':28s} {med_d / med_a:10.3f} {p99_d / p99_a:10.3f}")
+    print(f"  (the client received {np.mean(rates):.1f} frames/s)")
     print(
-        f"{'ratio (target 1.05 / 1.10)':28s} {med_b / med_a:10.3f} {p99_b / p99_a:10.3f}"
+        f"ticks achieved per second: without {len(a) / (args.rounds * args.seconds):.0f}, "
+        f"with {len(b) / (args.rounds * args.seconds):.0f}, elsewhere "
+        f"{len(c) / (args.rounds * args.seconds):.0f}"
     )
     rate = np.mean([f for f, _ in frames])
     print(f"page: {rate:.1f} frames/s received, {sum(s for _, s in frames)} skipped (busy page)")

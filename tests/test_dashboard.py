@@ -109,12 +109,12 @@ def test_token_rule_no_token_no_page_no_data(caplog):
 def test_loopback_only_unless_asked():
     assert isLoopback("127.0.0.1") and isLoopback("::1") and isLoopback("localhost")
     assert not isLoopback("0.0.0.0") and not isLoopback("192.168.1.4")
-    with pytest.raises(SotpyError, match="not a loopback address.*allowRemote"):
+    with pytest.raises(SotpyError, match=r"not a loopback address.*allowRemote"):
         Dashboard(None, host="0.0.0.0")
 
 
 def test_recorder_writes_the_tracers_files(tmp_path):
-    robot, feature, task, sot = ur5_reach()
+    robot, _feature, task, sot = ur5_reach()
     loop = ControlLoop("loop", robot.device, DT)
     tracer = Tracer("tracer")
     paths = [task.error.path, sot.control.path, robot.device.state.path]
@@ -161,10 +161,16 @@ def test_ring_is_bounded_and_keeps_the_newest_rows():
         assert n == ui.recorder.size - 1 == 9
         np.testing.assert_array_equal(data["tick"], np.arange(26 - n, 26))
         np.testing.assert_array_equal(data[task.error.path], np.array(errors[-n:]))
+        # what a page reads: the rows after its cursor, the components it asked for (a
+        # component beyond the signal's size is left out, not an error)
+        cursor, ticks, (block, none) = ui.recorder.since(20, [(task.error.path, [2, 0, 7]),
+                                                              ("nobody.x", None)])  # fmt: skip
+        assert cursor == 25 and ticks.tolist() == [21, 22, 23, 24, 25] and none is None
+        np.testing.assert_array_equal(block, np.array(errors[-5:])[:, [2, 0]])
 
 
 def test_a_plot_that_raises_stops_alone_and_the_loop_goes_on(caplog):
-    robot, feature, task, sot = ur5_reach()
+    robot, _feature, task, _sot = ur5_reach()
     loose = FeaturePose("loose")  # its position is unplugged: reading its error raises
     loop = ControlLoop("loop", robot.device, DT)
     with Dashboard(loop) as ui, caplog.at_level(logging.WARNING, "sotpy.dashboard"):
@@ -187,14 +193,14 @@ def test_edits_go_through_the_lock_and_refusals_change_nothing():
     with pytest.raises(SignalTypeError, match=r"Task\(task_ee\)::input\(double\)::controlGain"):
         applyEdit({"kind": "set", "signal": "task_ee.controlGain", "text": "[1, 2]"})
     assert task.controlGain.value == 5.0
-    with pytest.raises(SotpyError, match="is plugged to.*unplug it from the shell"):
+    with pytest.raises(SotpyError, match=r"is plugged to.*unplug it from the shell"):
         applyEdit({"kind": "set", "signal": "feature_ee.position", "value": 1.0})
     assert feature.position.source is not None
     with pytest.raises(SotpyError, match="has no command 'nope'"):
         applyEdit({"kind": "call", "entity": "sot", "command": "nope"})
     applyEdit({"kind": "call", "entity": "sot", "command": "remove", "args": ["task_ee"]})
     assert sot.list() == []
-    with pytest.raises(SotpyError, match="not in the stack|is not"):
+    with pytest.raises(SotpyError, match=r"not in the stack|is not"):
         applyEdit({"kind": "call", "entity": "sot", "command": "remove", "args": ["task_ee"]})
     applyEdit({"kind": "call", "entity": "sot", "command": "push", "args": ["task_ee"]})
     assert sot.list() == ["task_ee"]
@@ -208,7 +214,7 @@ def test_edits_go_through_the_lock_and_refusals_change_nothing():
 
 
 def test_graph_snapshot_and_status_show_what_is_missing_and_fresh():
-    robot, feature, task, sot = ur5_reach(forget=True)
+    robot, feature, _task, sot = ur5_reach(forget=True)
     g = graphSnapshot(robot.device)
     assert g["unplugged"] == ["feature_ee.Jq", "sot.dt"]
     names = {e["name"]: e for e in g["entities"]}
@@ -264,7 +270,9 @@ def test_controller_tasks_weights_and_ramps():
     assert posture["state"] == "activating" and posture["ramp"] == 0.0
     assert posture["rampDuration"] == 0.5
     assert st["constraints"][0]["name"] == "torque"
-    applyEdit({"kind": "call", "entity": "ctrl", "command": "setTaskWeight", "args": ["posture", 0.1]})
+    applyEdit(
+        {"kind": "call", "entity": "ctrl", "command": "setTaskWeight", "args": ["posture", 0.1]}
+    )
     assert status(None, [])["controllers"][0]["tasks"][0]["weight"] == 0.1
 
 
@@ -272,7 +280,7 @@ def test_malformed_websocket_requests_are_refused_logged_and_the_loop_runs(caplo
     import tornado.httpclient
     import tornado.websocket
 
-    robot, feature, task, sot = ur5_reach()
+    robot, _feature, task, _sot = ur5_reach()
     loop = ControlLoop("loop", robot.device, DT)
     with Dashboard(loop) as ui, caplog.at_level(logging.INFO, "sotpy.dashboard"):
         _, _, headers = _get(ui.url())
@@ -315,3 +323,56 @@ def test_malformed_websocket_requests_are_refused_logged_and_the_loop_runs(caplo
     assert task.controlGain.value == 3.0
     assert ui.refused >= 4
     assert sum("malformed" in r.message for r in caplog.records) >= 4
+
+
+def test_a_busy_page_loses_frames_not_ticks():
+    from concurrent.futures import Future
+
+    from sotpy.dashboard.server import _Client
+
+    robot, _feature, task, _sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    with Dashboard(loop) as ui:
+        ui.plot(task.error.path)
+
+        class FrozenPage:  # takes the first frame and never finishes writing it
+            def __init__(self):
+                self.frames = []
+
+            def write_message(self, data, binary=False):
+                self.frames.append(data)
+                return Future()  # never done: the browser does not read
+
+        page = _Client(FrozenPage())
+        page.series = [(1, task.error.path, [0, 1, 2])]
+        ui._clients.add(page)
+        try:
+            for _ in range(5):
+                loop.step(10)
+                ui._sendFrames()
+        finally:
+            ui._clients.discard(page)
+        binary = [f for f in page.ws.frames if isinstance(f, bytes)]  # (the plot's notice)
+        assert len(binary) == 1 and page.skipped >= 4  # (the server's timer skips too)
+        assert loop.ticks == 50 and loop.fault is None
+        assert page.cursor == 10  # the rows after it wait in the ring for the next frame
+        assert len(ui.data()["tick"]) == 50
+
+
+def test_the_3d_view_starts_on_demand_and_leaves_with_the_dashboard():
+    robot, _feature, _task, _sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    ui = Dashboard(loop, robot=robot)
+    try:
+        reply = ui._startViewer()
+        viewer = ui.viewer
+        assert reply["ok"] and reply["result"] == viewer.url()
+        assert any(viewer.display.path in s for s in robot.device.after.list())
+        loop.step(40)  # the view follows every 20 ticks
+        assert viewer.flush(10.0) and viewer.sent >= 2
+    finally:
+        ui.close()
+    assert not viewer.isOpen() and not pool.hasEntity(viewer.name)
+    assert robot.device.after.list() == []
+    with Dashboard(loop) as bare, pytest.raises(SotpyError, match="without a robot"):
+        bare._startViewer()

@@ -11,7 +11,6 @@ import pytest
 
 from sotpy.dashboard import Dashboard
 from sotpy.loop import ControlLoop
-
 from test_dashboard import DT, ur5_reach
 
 pytestmark = pytest.mark.needs("chromium")
@@ -32,7 +31,7 @@ def _type(page, selector: str, text: str) -> None:
 def test_page_graph_plot_edit_refusal(tmp_path):
     from sotpy.dashboard.browser import HeadlessPage
 
-    robot, feature, task, sot = ur5_reach()
+    robot, _feature, task, _sot = ur5_reach()
     loop = ControlLoop("loop", robot.device, DT)
     with Dashboard(loop, robot=robot) as ui, HeadlessPage(ui.url(), 1500, 950) as page:
         loop.start()
@@ -81,16 +80,20 @@ def test_page_graph_plot_edit_refusal(tmp_path):
         _type(page, f"{gain} .edit input", "[1, 2]")
         _click(page, f"{gain} .edit button")
         text = page.waitFor(
-            "(() => { const e = document.querySelector('#log .err'); return e && e.textContent; })()"
+            "(() => { const e = document.querySelector('#log .err');"
+            " return e && e.textContent; })()"
         )
         assert "REFUSED" in text and "Task(task_ee)::input(double)::controlGain" in text
         assert "expected a real number" in text
         assert task.controlGain.value == 5.0
         # the stack panel shows the SOT's levels with their residuals
-        page.waitFor("document.querySelector('table[data-sot=\"sot\"] tr[data-task=\"task_ee\"]') !== null")
+        page.waitFor(
+            'document.querySelector(\'table[data-sot="sot"] tr[data-task="task_ee"]\') !== null'
+        )
         shot = page.screenshot(tmp_path / "dashboard.png")
         assert loop.running and loop.fault is None
         loop.stop()
-    png = open(shot, "rb").read()
+    with open(shot, "rb") as f:
+        png = f.read()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     assert struct.unpack(">II", png[16:24]) == (1500, 950)

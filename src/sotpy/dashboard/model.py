@@ -233,7 +233,9 @@ def _sotLevels(sot: Any) -> dict[str, Any]:
         level: dict[str, Any] = {
             "level": k,
             "task": name,
-            "kind": "hard" if k < extra else ("inequality" if task and task.isInequality else "equality"),
+            "kind": "hard"
+            if k < extra
+            else ("inequality" if task and task.isInequality else "equality"),
             "rows": None,
             "gain": None,
         }
@@ -318,7 +320,8 @@ def status(
     state = getattr(device, "state", None)
     tick = state.time if isinstance(state, Signal) else pool.time
     last = tick - 1 if lastTick is None else lastTick
-    fresh = [i for i, s in enumerate(signals) if s._holder()._time >= last]
+    # before the first tick nothing was computed "at the last tick"
+    fresh = [i for i, s in enumerate(signals) if s._holder()._time >= last] if tick > 0 else []
     out: dict[str, Any] = {
         "tick": tick,
         "time": pool.time,
@@ -365,7 +368,7 @@ def _field(msg: dict[str, Any], key: str, kind: type | tuple[type, ...]) -> Any:
     if key not in msg:
         raise EditError(f"dashboard request {msg.get('kind')!r}: the field {key!r} is missing")
     value = msg[key]
-    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
         want = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
         raise EditError(
             f"dashboard request {msg.get('kind')!r}: {key!r} must be a {want}, got "
@@ -442,9 +445,7 @@ def applyEdit(msg: Any, recorder: Recorder | None = None) -> dict[str, Any]:
         else:
             recorder.remove(path)
         return {"ok": True, "result": path}
-    raise EditError(
-        f"unknown dashboard request kind {kind!r} (expected set, call, plot or unplot)"
-    )
+    raise EditError(f"unknown dashboard request kind {kind!r} (expected set, call, plot or unplot)")
 
 
 # ---------------------------------------------------------------------------------------
@@ -488,7 +489,9 @@ class Recorder:
 
     def __init__(self, name: str, device: Any, seconds: float, dt: float) -> None:
         if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
-            raise SotpyError(f"Dashboard({name}): history must be a number of s > 0, got {seconds!r}")
+            raise SotpyError(
+                f"Dashboard({name}): history must be a number of s > 0, got {seconds!r}"
+            )
         self.dt = float(dt)
         self.size = max(2, math.ceil(seconds / self.dt))
         self.seconds = self.size * self.dt
@@ -532,7 +535,9 @@ class Recorder:
             except Exception as exc:  # never stop the tick for a plot
                 c.error = f"{type(exc).__name__}: {exc}"
                 self._replan()
-                log.warning("dashboard: stopped recording %s at tick %d: %s", c.signal.name, t, c.error)
+                log.warning(
+                    "dashboard: stopped recording %s at tick %d: %s", c.signal.name, t, c.error
+                )
                 if data is not None:
                     data[i] = np.nan
         if self._plan is None and self._active:
@@ -553,7 +558,9 @@ class Recorder:
         """Hang the hook in the device's ``after`` list."""
         after = getattr(self.device, "after", None)
         if after is None:
-            raise SotpyError(f"{self.hook.entity.name}: the device {self.device!r} has no 'after' list")
+            raise SotpyError(
+                f"{self.hook.entity.name}: the device {self.device!r} has no 'after' list"
+            )
         with pool.lock:
             after.addSignal(self.hook)
         self._attached = True
@@ -572,9 +579,7 @@ class Recorder:
             if path in self._columns:
                 return
             if sig.type.to_array is None:
-                raise SotpyError(
-                    f"{sig.name}: {sig.type.name} values have no numeric form to plot"
-                )
+                raise SotpyError(f"{sig.name}: {sig.type.name} values have no numeric form to plot")
             c = _Column(sig)
             c.first = self._count
             self._columns[path] = c
@@ -623,6 +628,11 @@ class Recorder:
             if data is None:
                 out.append(None)
                 continue
+            if comps is not None:
+                comps = [k for k in comps if k < data.shape[1]]  # the page may ask too many
+                if not comps:
+                    out.append(None)
+                    continue
             block = data[idx] if comps is None else data[np.ix_(idx, comps)]
             out.append(block)
         return end, ticks, out

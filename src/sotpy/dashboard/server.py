@@ -347,7 +347,9 @@ class Dashboard:
             from tornado.httpserver import HTTPServer
 
             self._app = _application(self)
-            self._http = HTTPServer(self._app, max_body_size=MAX_MESSAGE, idle_connection_timeout=60)
+            self._http = HTTPServer(
+                self._app, max_body_size=MAX_MESSAGE, idle_connection_timeout=60
+            )
             self._http.add_sockets([self._sock])
             from tornado.ioloop import PeriodicCallback
 
@@ -389,7 +391,12 @@ class Dashboard:
                 continue
             if rec.count == c.cursor:
                 continue
-            frame, c.cursor = _frame(rec, c)
+            try:
+                frame, c.cursor = _frame(rec, c)
+            except Exception as exc:  # never let one page's request stop the others'
+                log.warning("dashboard: cannot build a frame for a page: %r", exc)
+                c.series, c.cursor = [], rec.count
+                continue
             try:
                 c.pending = c.ws.write_message(frame, binary=True)
                 c.frames += 1
@@ -462,9 +469,7 @@ class Dashboard:
             elif kind == "viewer":
                 reply = await asyncio.wrap_future(self._work.submit(self._startViewer))
             else:
-                reply = await asyncio.wrap_future(
-                    self._work.submit(applyEdit, msg, self.recorder)
-                )
+                reply = await asyncio.wrap_future(self._work.submit(applyEdit, msg, self.recorder))
                 if kind in ("plot", "unplot", "set", "call"):
                     self._work.submit(self._pushStatus)
         except EditError as exc:
@@ -476,7 +481,11 @@ class Dashboard:
             reply = {"ok": False, "error": str(exc), "errorType": type(exc).__name__}
         except Exception as exc:  # anything else a command raised: shown, not fatal
             log.info("dashboard: edit failed: %r", exc)
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "errorType": type(exc).__name__}
+            reply = {
+                "ok": False,
+                "error": f"{type(exc).__name__}: {exc}",
+                "errorType": type(exc).__name__,
+            }
         reply = {"type": "reply", "id": rid if isinstance(rid, (int, str)) else None, **reply}
         with contextlib.suppress(Exception):
             client.ws.write_message(json.dumps(reply))
@@ -634,6 +643,10 @@ def _application(ui: Dashboard) -> Any:
             self.set_header("Content-Disposition", f'attachment; filename="sotpy-{stamp}.{fmt}"')
             self.finish(data)
 
+    class NoIcon(tornado.web.RequestHandler):
+        def get(self) -> None:
+            self.set_status(204)  # no favicon: say so instead of a logged 404
+
     class Socket(tornado.websocket.WebSocketHandler):
         client: _Client | None = None
 
@@ -675,6 +688,7 @@ def _application(ui: Dashboard) -> Any:
         [
             (r"/", Index),
             (r"/ws", Socket),
+            (r"/favicon\.ico", NoIcon),
             (r"/record\.(npz|csv)", Record),
             (r"/static/(.*)", Static, {"path": str(STATIC)}),
         ],

@@ -163,7 +163,9 @@ def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
     )
 
 
-def open_dashboard(loop: Any, robot: Any, args: argparse.Namespace, token: str | None = None) -> Any:
+def open_dashboard(
+    loop: Any, robot: Any, args: argparse.Namespace, token: str | None = None
+) -> Any:
     """The :class:`~sotpy.dashboard.Dashboard` of ``loop`` that the ``--ui`` options of
     ``args`` ask for (``robot``: its ``model`` and ``visual_model``, for the 3-D view)."""
     from ..dashboard import Dashboard
