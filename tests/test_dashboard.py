@@ -376,3 +376,55 @@ def test_the_3d_view_starts_on_demand_and_leaves_with_the_dashboard():
     assert robot.device.after.list() == []
     with Dashboard(loop) as bare, pytest.raises(SotpyError, match="without a robot"):
         bare._startViewer()
+
+
+def test_sotpy_serve_ui_prints_the_page_and_keeps_the_token_rule(tmp_path):
+    import os
+    import re
+    import signal
+    import subprocess
+    import sys
+
+    env = {**os.environ, "SOTPY_JIT": os.environ.get("SOTPY_JIT", "0")}
+    conn = tmp_path / "conn.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sotpy", "serve", "ur5", "--paused", "--ui",
+         "--connection-file", str(conn)],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env,
+    )  # fmt: skip
+    try:
+        url = None
+        for line in proc.stdout:
+            m = re.match(r"dashboard: (http://127\.0\.0\.1:\d+/\?token=\S+)", line)
+            if m:
+                url = m.group(1)
+            if line.startswith("sotpy serve:"):
+                break
+        assert url is not None
+        token = url.split("token=")[1]
+        assert json.loads(conn.read_text())["token"] == token  # one secret for both
+        base = url.split("?")[0]
+        assert _get(base)[0] == 403
+        assert _get(url)[0] == 302
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(30)
+    assert proc.returncode == 0
+    with pytest.raises(SotpyError, match="not a loopback"):
+        Dashboard(None, host="10.1.2.3")  # refused before anything listens
+
+
+def test_sotpy_demo_ui_builds_the_graph_and_serves_it():
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "SOTPY_JIT": os.environ.get("SOTPY_JIT", "0")}
+    out = subprocess.run(
+        [sys.executable, "-m", "sotpy", "demo", "nao", "--ui", "--hold", "0.5"],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "paused at tick 1" in out.stdout
+    assert "http://127.0.0.1:" in out.stdout and "?token=" in out.stdout
+    assert "stopped; loop statistics" in out.stdout
