@@ -65,7 +65,7 @@ def test_page_graph_plot_edit_refusal(tmp_path):
         )
         # the plotted error is the task's, at its tick
         assert abs(y - float(task.error.value[0])) < 0.05
-        # the fresh marks: the task's error was computed at the last tick
+        # the fresh marks: the plotted error is computed at every tick (by the recorder)
         page.waitFor(
             "document.querySelector('.sig[data-path=\"task_ee.error\"]').classList"
             ".contains('fresh')"

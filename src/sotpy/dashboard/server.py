@@ -77,13 +77,15 @@ _COOKIE = "sotpy_dashboard"
 
 
 def isLoopback(host: str) -> bool:
-    """Whether ``host`` names this machine only (127.0.0.0/8, ::1, ``localhost``)."""
-    if host == "localhost":
-        return True
+    """Whether ``host`` names this machine only: an address in 127.0.0.0/8 or ``::1``,
+    or a name every address of which is (the remote interpreter's rule, whose helper
+    resolves names)."""
+    from ..remote import _isLoopback
+
     try:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
-        return False
+        return _isLoopback(host)
 
 
 def _matches(token: str | None, expected: str) -> bool:
@@ -142,7 +144,7 @@ class Dashboard:
             if not allowRemote:
                 raise SotpyError(
                     f"{who}: {host!r} is not a loopback address; the page would be reachable "
-                    "from the network: pass allowRemote=True (sotpy: --ui-remote) to do it "
+                    "from the network: pass allowRemote=True (sotpy: --ui-allow-remote) to do it "
                     "anyway, or forward the port (ssh -L PORT:127.0.0.1:PORT robot-pc)"
                 )
             msg = (

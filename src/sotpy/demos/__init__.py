@@ -140,7 +140,7 @@ def viewer_options(parser: argparse.ArgumentParser) -> None:
 
 def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
     """Add ``--ui`` (the live dashboard, :class:`sotpy.dashboard.Dashboard`),
-    ``--ui-port P``, ``--ui-host H`` and ``--ui-remote`` (required with a host that is
+    ``--ui-port P``, ``--ui-host H`` and ``--ui-allow-remote`` (required with a host that is
     not loopback)."""
     g = parser.add_argument_group("dashboard (docs/dashboard.md)")
     what = (
@@ -156,7 +156,7 @@ def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
         "--ui-host", default="127.0.0.1", metavar="H", help="its address (default 127.0.0.1)"
     )
     g.add_argument(
-        "--ui-remote",
+        "--ui-allow-remote",
         action="store_true",
         help="allow --ui-host to be an address other than loopback (the page is then "
         "reachable from the network, over plain HTTP: a warning says so)",
@@ -175,7 +175,7 @@ def open_dashboard(
         robot=robot,
         host=args.ui_host,
         port=args.ui_port,
-        allowRemote=args.ui_remote,
+        allowRemote=args.ui_allow_remote,
         token=token,
     )
 
