@@ -1,4 +1,5 @@
-"""Cost of ``sotpy.solvers`` per solve (issue 4's solver benchmark).
+"""Cost of ``sotpy.solvers`` per solve on drifting stacks (the microbenchmark; the worst
+cases are ``bench_worst_case.py``).
 
 Two stacks on ``n = 40`` variables whose data drift slowly from one solve to the next
 (as Jacobians and errors do from one control tick to the next):
@@ -12,13 +13,13 @@ Two stacks on ``n = 40`` variables whose data drift slowly from one solve to the
   answers) and ``active`` (bounds that the posture and the inequality task push
   against: QP levels every tick).
 * **box + equalities** (the SOT's stand-and-reach shape): the same box, tight, then the
-  equality levels only; bounds are active every tick. The active-set path (default)
-  against the QP cascade of the same solver (``active_set=False``).
+  equality levels only; bounds are active every tick.
 
-Each variant is timed for the persistent :class:`HierarchySolver` (the SOT's path) and
-for the references of ``tests/reference_hierarchy.py`` in the same run (the n x n
-projector + SVD recursion; the plain proxsuite cascade, fewer solves). The solutions are
-checked against the references (largest difference of level residuals). Usage::
+Each variant is timed for the persistent :class:`HierarchySolver` (the SOT's path, with
+its default time budget) and for the references of ``tests/reference_hierarchy.py`` in
+the same run (the n x n projector + SVD recursion; the plain proxsuite cascade, fewer
+solves). The solutions are checked against the references (largest difference of level
+residuals); the iterations per solve and the budget hits are reported. Usage::
 
     python benchmarks/bench_hierarchy.py            # full run, prints Markdown
     python benchmarks/bench_hierarchy.py --quick    # fewer solves, for a smoke check
@@ -172,30 +173,29 @@ def run(n_solves: int, n_ref: int) -> str:
         name = "active" if active else "free"
         ineq = InequalityStack(active)
         inputs = [ineq.levels(t) for t in range(n_solves)]
-        for backend in ("daqp", "proxsuite"):
-            solver = HierarchySolver(backend=backend)
-            for levels in inputs[:20]:
-                solver.solve(levels)
-            qps = []
-            conv = []
+        solver = HierarchySolver()
+        for levels in inputs[:20]:
+            solver.solve(levels)
+        its: list[int] = []
+        hits: list[bool] = []
 
-            def solve(levels, solver=solver, qps=qps, conv=conv):
-                r = solver.solve(levels)
-                qps.append(len(r.qp_levels))
-                conv.append(r.converged)
-                return r
+        def solve(levels, solver=solver, its=its, hits=hits):
+            r = solver.solve(levels)
+            its.append(r.iterations)
+            hits.append(r.budget_hit)
+            return r
 
-            times, _ = _timed(solve, inputs)
-            worst = 0.0
-            for levels in inputs[:: max(1, n_solves // 10)][:n_ref]:
-                _, opt = ref.cascade_hierarchy([_three(lv) for lv in levels])
-                res = solver.solve(levels).residuals
-                worst = max(worst, float(np.abs(res - np.array(opt)).max()))
-            note = (
-                f"QP levels per solve {np.mean(qps):.2f}, not converged {conv.count(False)},"
-                f" max residual error {worst:.1e}"
-            )
-            lines.append(_row(f"inequalities {name}, {backend}", times, note))
+        times, _ = _timed(solve, inputs)
+        worst = 0.0
+        for levels in inputs[:: max(1, n_solves // 10)][:n_ref]:
+            _, opt = ref.cascade_hierarchy([_three(lv) for lv in levels])
+            res = solver.solve(levels).residuals
+            worst = max(worst, float(np.abs(res - np.array(opt)).max()))
+        note = (
+            f"iterations per solve {np.mean(its):.2f} (max {max(its)}), budget hits"
+            f" {sum(hits)}, max residual error {worst:.1e}"
+        )
+        lines.append(_row(f"inequalities {name}, HierarchySolver.solve", times, note))
         t_ref, _ = _timed(
             lambda levels: ref.cascade_hierarchy([_three(lv) for lv in levels]),
             inputs[: max(3, n_ref // 10)],
@@ -204,37 +204,28 @@ def run(n_solves: int, n_ref: int) -> str:
     # ------------------------------------------------------- box + equalities
     box = BoxStack()
     inputs = [box.levels(t) for t in range(n_solves)]
-    fast, slow = HierarchySolver(), HierarchySolver(active_set=False)
+    solver = HierarchySolver()
     for levels in inputs[:20]:
-        fast.solve(levels)
-        slow.solve(levels)
-    methods: list[str] = []
+        solver.solve(levels)
+    its = []
 
-    def solve_fast(levels):
-        r = fast.solve(levels)
-        methods.append(r.method)
+    def solve_box(levels):
+        r = solver.solve(levels)
+        its.append(r.iterations)
         return r
 
-    # interleaved halves: the machine's speed drifts
-    half = len(inputs) // 2
-    t1, _ = _timed(solve_fast, inputs[:half])
-    s1, _ = _timed(slow.solve, inputs[:half])
-    s2, _ = _timed(slow.solve, inputs[half:])
-    t2, _ = _timed(solve_fast, inputs[half:])
-    t_fast, t_slow = np.concatenate([t1, t2]), np.concatenate([s1, s2])
-    worst = max(
-        float(np.abs(fast.solve(lv).x - slow.solve(lv).x).max())
-        for lv in inputs[:: max(1, n_solves // 50)]
-    )
-    share = methods.count("active-set") / len(methods)
-    lines += [
+    t_box, _ = _timed(solve_box, inputs)
+    worst = 0.0
+    for levels in inputs[:: max(1, n_solves // 10)][:n_ref]:
+        _, opt = ref.cascade_hierarchy([_three(lv) for lv in levels])
+        worst = max(worst, float(np.abs(solver.solve(levels).residuals - np.array(opt)).max()))
+    lines.append(
         _row(
-            "box + equalities, active-set path",
-            t_fast,
-            f"active-set {share:.0%} of solves; max abs(x - cascade x) {worst:.1e}",
-        ),
-        _row("box + equalities, QP cascade (active_set=False)", t_slow),
-    ]
+            "box + equalities, HierarchySolver.solve",
+            t_box,
+            f"iterations per solve {np.mean(its):.2f}; max residual error {worst:.1e}",
+        )
+    )
     return "\n".join(lines)
 
 

@@ -99,7 +99,7 @@ def _qp(n, H, g, E, f, C, lo, up, eps):
             # sets left by frozen levels: retry looser (the tests' tolerances are 1e-6)
             return _qp(n, H, g, E, f, C, lo, up, eps * 10)
         raise RuntimeError(f"reference QP not solved: {status}")
-    return np.array(qp.results.x)
+    return np.array(qp.results.x), np.array(qp.results.z)
 
 
 def _pad(M: np.ndarray, m: int) -> np.ndarray:
@@ -113,9 +113,10 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
     Returns ``(x, optimal)``: the minimum-norm point of the final optimal set and the
     optimal violation norm of each level over the optimal set of the levels above.
     With ``damping`` (lambda, one number or one per level), level ``k`` minimises
-    ``||w||^2 + lambda^2 ||x - x_{k-1}||^2``
-    (``x_{k-1}`` the previous level's solution, ``x_0 = 0``) and its optimal set is the
-    set of the levels above with the level's rows pinned as at its solution.
+    ``||w||^2 + lambda^2 ||x||^2`` (Tikhonov within the level) and its optimal set is the
+    set of the levels above with the level's rows pinned as at its solution, and (a
+    damped level) the frozen rows above it pushes against (a multiplier above 1e-7 times
+    the level's gradient scale) pinned at their bounds, as the solver defines it.
     A frozen row violated at its level's optimum (equality rows included) becomes the
     equality constraint ``A_j x = A_j x_j*``; the others keep their interval widened by
     ``margin`` (so that the next QP stays feasible despite the solver's tolerance).
@@ -129,22 +130,26 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
     cup = np.zeros(0)
     optimal = []
     big = np.inf
-    x_prev = np.zeros(n)
     for (A, lo, up), damping in zip(levels, dampings, strict=True):
         m = A.shape[0]
-        # variables v = (x, w): min 1/2 ||w||^2 + 1/2 lambda^2 ||x - x_prev||^2
+        # variables v = (x, w): min 1/2 ||w||^2 + 1/2 lambda^2 ||x||^2
         # (lambda = 0: a negligible 1e-12 ||x||^2 instead)
         H = np.zeros((n + m, n + m))
         H[n:, n:] = np.eye(m)
         H[:n, :n] = max(damping**2, 1e-12) * np.eye(n)
         g = np.zeros(n + m)
-        g[:n] = -(damping**2) * x_prev
         Cv = np.vstack([_pad(C, m), np.hstack([A, -np.eye(m)])])
         lov = np.concatenate([clo, np.maximum(lo, -big)])
         upv = np.concatenate([cup, np.minimum(up, big)])
-        v = _qp(n + m, H, g, _pad(E, m), f, Cv, lov, upv, eps)
+        v, z = _qp(n + m, H, g, _pad(E, m), f, Cv, lov, upv, eps)
         x, w = v[:n], v[n:]
-        x_prev = x
+        if damping > 0.0 and len(C):
+            scale = np.abs(A).max(initial=1.0) * (1.0 + np.abs(w).max(initial=0.0))
+            scale += damping**2 * (1.0 + np.abs(x).max())
+            pushed = np.abs(z[: len(C)]) * np.abs(C).max(axis=1) > 1e-7 * scale
+            E = np.vstack([E, C[pushed]])
+            f = np.concatenate([f, C[pushed] @ x])
+            C, clo, cup = C[~pushed], clo[~pushed], cup[~pushed]
         optimal.append(float(np.linalg.norm(violation(A, lo, up, x))))
         pinned = (lo == up) | (np.abs(w) > 10 * margin)
         E = np.vstack([E, A[pinned]])
@@ -152,5 +157,5 @@ def cascade_hierarchy(levels, eps: float = 1e-10, margin: float = 1e-9, damping:
         C = np.vstack([C, A[~pinned]])
         clo = np.concatenate([clo, np.maximum(lo[~pinned], -big) - margin])
         cup = np.concatenate([cup, np.minimum(up[~pinned], big) + margin])
-    x = _qp(n, np.eye(n), np.zeros(n), E, f, C, clo, cup, eps)
+    x, _ = _qp(n, np.eye(n), np.zeros(n), E, f, C, clo, cup, eps)
     return x, optimal

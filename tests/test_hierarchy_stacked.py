@@ -25,7 +25,13 @@ def assert_identical(a, b) -> None:
     np.testing.assert_array_equal(a.x, b.x)
     np.testing.assert_array_equal(a.residuals, b.residuals)
     np.testing.assert_array_equal(a.ranks, b.ranks)
-    assert (a.method, a.qp_levels, a.feasible) == (b.method, b.qp_levels, b.feasible)
+    assert (a.method, a.status, a.iterations, a.n_active, a.feasible) == (
+        b.method,
+        b.status,
+        b.iterations,
+        b.n_active,
+        b.feasible,
+    )
 
 
 @pytest.mark.parametrize("seed", range(8))

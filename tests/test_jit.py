@@ -15,8 +15,8 @@ def _enabled_with(value: str | None) -> str:
     if value is not None:
         env["SOTPY_JIT"] = value
     code = (
-        "import sotpy._jit as j, sotpy.solvers._eqkernel as e;"
-        "print(j.ENABLED, e.equality_all is None)"
+        "import sotpy._jit as j, sotpy.solvers._activeset_jit as e;"
+        "print(j.ENABLED, e.solve is None)"
     )
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr

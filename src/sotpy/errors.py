@@ -134,3 +134,8 @@ class StaleSignalError(BridgeError):
 
 class SotpyWarning(UserWarning):
     """Warnings emitted by sotpy (e.g. a tracer buffer that filled up)."""
+
+
+class BudgetWarning(SotpyWarning):
+    """A solver stopped at its iteration or time budget (said once until it converges
+    again; the control loop's statistics count every such tick)."""

@@ -133,7 +133,8 @@ class LoopStats:
     deadline (real-time runs only; 0 otherwise). ``misses``: ticks that ended after the
     next deadline; ``skipped``: deadlines dropped to catch up. ``rate``: ticks per
     second of wall time, ``(ticks - 1) / (start of the last tick - start of the
-    first)`` (``nan`` before the second tick).
+    first)`` (``nan`` before the second tick). ``budget_hits``: ticks during which a
+    solver (an ``SOT``, a torque ``Controller``) stopped at its iteration or time budget.
     """
 
     ticks: int
@@ -150,6 +151,7 @@ class LoopStats:
     running: bool
     realtime: bool
     fault: str | None
+    budget_hits: int = 0
 
     def __str__(self) -> str:
         us = 1e6
@@ -162,7 +164,8 @@ class LoopStats:
             f"max {self.tick_max * us:8.1f} us",
             f"latency  mean {self.latency_mean * us:8.1f} us  p99 {self.latency_p99 * us:8.1f} "
             f"us  max {self.latency_max * us:8.1f} us",
-            f"deadline misses {self.misses}, skipped deadlines {self.skipped}",
+            f"deadline misses {self.misses}, skipped deadlines {self.skipped},"
+            f" solver budget hits {self.budget_hits}",
         ]
         if self.fault:
             lines.append(f"FAULT: {self.fault}")
@@ -205,6 +208,7 @@ class _RunStats:
     """
 
     __slots__ = (
+        "budgetHits",
         "count",
         "firstBegin",
         "lastBegin",
@@ -225,6 +229,7 @@ class _RunStats:
         self.misses = 0  # ticks that ended after the next deadline
         self.skipped = 0  # deadlines dropped to catch up
         self.firstBegin = self.lastBegin = 0  # perf_counter_ns of the first, last tick
+        self.budgetHits = 0  # ticks during which a solver stopped at its budget
 
 
 def _locate(tb: Any) -> tuple[str | None, str | None]:
@@ -450,6 +455,7 @@ class ControlLoop(Entity):
             running=self.running,
             realtime=self._realtime,
             fault=str(self._fault) if self._fault else None,
+            budget_hits=st.budgetHits,
         )
 
     @command
@@ -566,10 +572,13 @@ class ControlLoop(Entity):
                     torque = self._hasControlType() and self._device.getControlType() == "torque"
                 if torque:
                     t = max(self._device.state.time, 0)
+                hits = pool.budgetHits
                 increment(dt)
                 if torque:
                     self._lastTorque = np.array(self._device.control(t), dtype=np.float64)
                 end = clock()
+                if pool.budgetHits != hits:
+                    self._stats.budgetHits += 1
             except BaseException as exc:  # SystemExit and Ctrl-C too: the device is made safe
                 if not locked:
                     raise  # interrupted while waiting for the lock: no tick ran

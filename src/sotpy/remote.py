@@ -43,7 +43,7 @@ makes into sotpy (a command, a signal read or write, a plug, an entity's creatio
 :attr:`pool.lock <sotpy.graph.pool.Pool.lock>` for that call only, so a tick never sees
 half an edit; the rest (a loop, a ``time.sleep``, numpy, printing) runs while the loop
 ticks, and yields the interpreter every 0.1 ms so that the loop keeps its rate (see
-:class:`_GraphScope`). Edits that must land together go in ``with loop.edit():`` (no
+``_GraphScope``). Edits that must land together go in ``with loop.edit():`` (no
 tick runs inside the block). With ``exec_timeout`` set, remote code still running after
 that many seconds is interrupted (:class:`~sotpy.errors.RemoteTimeout`, a
 ``KeyboardInterrupt``); a call into sotpy or a blocking C call finishes first. The loop never
@@ -559,7 +559,7 @@ class _GraphScope:
 
 class _Console(code.InteractiveConsole):
     """A console whose output goes to the capture buffer (``write`` -> sys.stderr) and
-    whose code runs in a :class:`_GraphScope`."""
+    whose code runs in a ``_GraphScope``."""
 
     def __init__(self, namespace: dict[str, Any], scope: _GraphScope) -> None:
         super().__init__(namespace, filename="<remote>")
@@ -889,7 +889,7 @@ class RemoteClient:
     wait for each reply (remote code may run long). A request that cannot be sent
     (longer than :data:`MAX_LINE`) or a reply that cannot be read (too long, not JSON)
     raises ``RemoteError`` and leaves the connection usable; a lost connection (or a
-    reply that timed out) raises ``RemoteError`` and sets :attr:`lost`.
+    reply that timed out) raises ``RemoteError`` and sets ``lost``.
     """
 
     def __init__(

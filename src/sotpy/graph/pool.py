@@ -48,6 +48,9 @@ class Pool:
         #: Held by a running loop during each tick; hold it to edit the graph atomically
         #: from another thread (``with pool.lock: ...``). Re-entrant.
         self.lock: threading.RLock = threading.RLock()
+        #: Solves that stopped at their budget (entities with a time-budgeted solver add
+        #: one each time); a control loop counts the ticks during which it moved.
+        self.budgetHits: int = 0
 
     # -- entities ---------------------------------------------------------------------
     def register(self, entity: Entity) -> None:
@@ -143,6 +146,7 @@ class Pool:
         self._entities.clear()
         self.time = 0
         self.version += 1
+        self.budgetHits = 0
 
     def advance(self, t: int) -> None:
         """Move the clock forward to tick ``t`` (never backwards)."""

@@ -3,7 +3,7 @@
 ``solve_hierarchy(levels, damping=0.0)`` returns the lexicographic optimum of a stack of
 levels ``lower_k <= A_k x <= upper_k`` (equalities where ``lower == upper``), with the
 minimum-norm solution among the optimal ones; :class:`HierarchySolver` is the persistent
-version (buffers, QP problems and warm starts kept between calls) that the SOT entity
+version (buffers and the warm start kept between calls) that the SOT entity
 keeps between ticks, and :class:`SOT` is that entity. See
 :mod:`sotpy.solvers.hierarchy` and ``docs/solvers.md``.
 

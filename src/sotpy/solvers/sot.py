@@ -57,7 +57,14 @@ from typing import Any
 import numpy as np
 
 from .._jit import refused
-from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
+from ..errors import (
+    BudgetWarning,
+    CommandError,
+    EntityError,
+    SignalTypeError,
+    SotpyError,
+    SotpyWarning,
+)
 from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, plug
 from ..graph.pool import pool
 from ..tasks import _rowkernels
@@ -103,6 +110,9 @@ class SOT(Entity):
         self._solver = HierarchySolver()
         self.lastResult: Any = None
         self._warned = False
+        self._budgetWarned = False
+        #: ticks whose solve stopped at its iteration or time budget
+        self.budgetHits = 0
         self._limits: tuple[Any, ...] | None = None
         self._taskDamping: dict[str, float] = {}
         # (fused plan, level sizes) of the last tick solved through _fusedLevels: the
@@ -326,6 +336,45 @@ class SOT(Entity):
         self._rewire()
 
     @command
+    def setTimeBudget(self, seconds: float | None) -> None:
+        """The solver's time budget per tick, in seconds of the ticking thread's CPU time
+        (finite, > 0; ``None`` from Python: no time budget, for offline runs). A tick that
+        reaches it returns the best control proven so far (see ``docs/solvers.md``)."""
+        if seconds is not None:
+            ok = isinstance(seconds, (int, float, np.floating, np.integer)) and not isinstance(
+                seconds, bool
+            )
+            if not (ok and math.isfinite(seconds) and seconds > 0.0):
+                raise CommandError(
+                    f"SOT({self.name}).setTimeBudget: the time budget must be a finite number"
+                    f" of seconds > 0, got {seconds!r}; the budget is unchanged"
+                    f" ({self._solver.time_budget})"
+                )
+        self._solver.time_budget = seconds
+        self.control.setReady()
+
+    @command
+    def getTimeBudget(self) -> float | None:
+        """The solver's time budget per tick (s of CPU time; ``None``: none)."""
+        return self._solver.time_budget
+
+    @command
+    def setMaxIterations(self, n: int) -> None:
+        """The solver's iteration budget per tick (equality-hierarchy solves, >= 1)."""
+        if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
+            raise CommandError(
+                f"SOT({self.name}).setMaxIterations: the iteration budget must be an integer"
+                f" >= 1, got {n!r}; the budget is unchanged ({self._solver.max_iter})"
+            )
+        self._solver.max_iter = int(n)
+        self.control.setReady()
+
+    @command
+    def getMaxIterations(self) -> int:
+        """The solver's iteration budget per tick."""
+        return self._solver.max_iter
+
+    @command
     def getSize(self) -> int:
         """nv, the size of ``control`` (raises while it is not known)."""
         return self.nv
@@ -433,6 +482,21 @@ class SOT(Entity):
                 )
         elif self._warned:
             self._warned = False
+        if result.status != "optimal":
+            self.budgetHits += 1
+            pool.budgetHits += 1
+            if not self._budgetWarned:
+                self._budgetWarned = True
+                warnings.warn(
+                    f"SOT({self.name}): the solver stopped at its {result.status} budget"
+                    f" (time budget {self._solver.time_budget}, max iterations"
+                    f" {self._solver.max_iter}): {result.reason}. Said once until it converges"
+                    " again; sot.budgetHits and the loop's stats count every such tick",
+                    BudgetWarning,
+                    stacklevel=3,
+                )
+        elif self._budgetWarned:
+            self._budgetWarned = False
         return result.x
 
     # -- fused evaluation of the tasks ------------------------------------------------

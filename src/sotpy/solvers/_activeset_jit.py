@@ -1,0 +1,800 @@
+"""The hierarchical solver's iteration as one compiled call (internal to ``sotpy.solvers``;
+the algorithm is stated in :mod:`._activeset`, whose NumPy ``solve`` this mirrors).
+
+Why a second implementation: at these sizes (tens of rows, 20 to 80 variables) a NumPy or
+LAPACK call costs more in fixed overhead than in arithmetic, and an iteration makes a few
+dozen of them; compiled, one iteration on the Talos stand-and-reach stack costs about
+40 us. The differences from the NumPy twin, all in the cost, none in the decisions:
+
+* the basis is kept transposed (``Yt``: a row per direction), so that every product is a
+  dot product of contiguous rows, and the pivoted QR of ``M^T`` works on the rows of
+  ``M`` (LAPACK's column storage, transposed; the column norms recomputed at each step,
+  small sizes);
+* an iteration restarts the recursion at the first level whose active set changed (the
+  levels above, their basis rows and point are kept);
+* the budget is read from ``clock_gettime(CLOCK_THREAD_CPUTIME_ID)`` (libc, reached through
+  its address as an external symbol), the same clock as :func:`time.thread_time`.
+
+``solve`` is ``None`` when compiled kernels are disabled (:mod:`sotpy._jit`) or the
+platform has no thread CPU clock.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+
+import numpy as np
+
+from .._jit import ENABLED, kernel
+from ._activeset import (
+    CROSSED_BOUNDS,
+    EQ,
+    FREE,
+    INEQ,
+    INFINITE_EQUALITY,
+    ITERATIONS,
+    NAN_BOUND,
+    NONFINITE_MATRIX,
+    NONFINITE_RESULT,
+    OPTIMAL,
+    TIME,
+)
+
+__all__ = ["solve", "warm_up"]
+
+solve = None
+_CLOCK = getattr(time, "CLOCK_THREAD_CPUTIME_ID", None)
+
+
+def _clock_symbol():
+    """The external ``clock_gettime`` for compiled code, or None."""
+    try:
+        import llvmlite.binding as llvm
+        from numba import types as nt
+
+        libc = ctypes.CDLL(None)
+        addr = ctypes.cast(libc.clock_gettime, ctypes.c_void_p).value
+    except (ImportError, OSError, AttributeError):  # pragma: no cover - not on Linux/macOS
+        return None
+    llvm.add_symbol("sotpy_clock_gettime", addr)
+    return nt.ExternalFunction("sotpy_clock_gettime", nt.int32(nt.int32, nt.voidptr))
+
+
+_clock_gettime = _clock_symbol() if ENABLED and _CLOCK is not None else None
+
+if _clock_gettime is not None:  # pragma: no branch - the environment decides
+    _CLOCK_ID = int(_CLOCK)
+
+    @kernel(fast=True)
+    def _cpu_time(buf):  # pragma: no cover - compiled
+        _clock_gettime(_CLOCK_ID, buf.ctypes)
+        return buf[0] + 1e-9 * buf[1]
+
+    @kernel(fast=True)
+    def _dot(a, b, n):  # pragma: no cover - compiled
+        s = 0.0
+        for i in range(n):
+            s += a[i] * b[i]
+        return s
+
+    @kernel(fast=True)
+    def _pivoted_qr(M, mk, f, tau, piv):  # pragma: no cover - compiled
+        """Householder QR with column pivoting of ``M^T`` (``f x mk``) on the rows of
+        ``M``: row ``s`` ends holding ``R[:s+1, s]`` then reflector ``s`` (unit entry
+        ``s`` implicit), row ``j >= f`` all of ``R[:, j]``; ``piv[s]`` the original
+        index of row ``s``. Returns ``min(mk, f)``."""
+        kmin = min(mk, f)
+        for j in range(mk):
+            piv[j] = j
+        for s in range(kmin):
+            best = s
+            bn = -1.0
+            for j in range(s, mk):
+                v = 0.0
+                for i in range(s, f):
+                    v += M[j, i] * M[j, i]
+                if v > bn:
+                    bn = v
+                    best = j
+            if best != s:
+                for i in range(f):
+                    tmp = M[s, i]
+                    M[s, i] = M[best, i]
+                    M[best, i] = tmp
+                tp = piv[s]
+                piv[s] = piv[best]
+                piv[best] = tp
+            alpha = M[s, s]
+            xn2 = 0.0
+            for i in range(s + 1, f):
+                xn2 += M[s, i] * M[s, i]
+            if xn2 == 0.0:
+                tau[s] = 0.0
+                continue
+            beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
+            t = (beta - alpha) / beta
+            tau[s] = t
+            scale = 1.0 / (alpha - beta)
+            for i in range(s + 1, f):
+                M[s, i] *= scale
+            M[s, s] = beta
+            for j in range(s + 1, mk):
+                w = M[j, s]
+                for i in range(s + 1, f):
+                    w += M[s, i] * M[j, i]
+                w *= t
+                M[j, s] -= w
+                for i in range(s + 1, f):
+                    M[j, i] -= w * M[s, i]
+        return kmin
+
+    @kernel(fast=True)
+    def _reflect_basis(M, tau, r, f, Yt, c, n, w):  # pragma: no cover - compiled
+        """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``."""
+        for s in range(r):
+            t = tau[s]
+            if t == 0.0:
+                continue
+            for col in range(n):
+                w[col] = Yt[c + s, col]
+            for i in range(s + 1, f):
+                vi = M[s, i]
+                for col in range(n):
+                    w[col] += vi * Yt[c + i, col]
+            for col in range(n):
+                Yt[c + s, col] -= t * w[col]
+            for i in range(s + 1, f):
+                vi = t * M[s, i]
+                for col in range(n):
+                    Yt[c + i, col] -= vi * w[col]
+
+    @kernel(fast=True)
+    def _level_step(M, mk, r, rhs, lam, u, G):  # pragma: no cover - compiled
+        """``u = argmin ||B^T u - rhs||^2 + lam^2 ||u||^2``, ``B^T[j, i] = M[j, i]``
+        (``i <= j``, lower trapezoidal, full column rank ``r``): forward substitution when
+        square and undamped, else a Householder QR of ``[B^T; lam I]`` (on the rows of
+        ``G``, its transpose, the right-hand side in row ``r``)."""
+        if lam == 0.0 and mk == r:
+            for j in range(r):
+                s = rhs[j]
+                for i in range(j):
+                    s -= M[j, i] * u[i]
+                u[j] = s / M[j, j]
+            return
+        w = mk + r
+        for i in range(r):
+            for j in range(w):
+                G[i, j] = 0.0
+            for j in range(i, mk):
+                G[i, j] = M[j, i]
+            G[i, mk + i] = lam
+        for j in range(mk):
+            G[r, j] = rhs[j]
+        for j in range(mk, w):
+            G[r, j] = 0.0
+        for s in range(r):
+            alpha = G[s, s]
+            xn2 = 0.0
+            for j in range(s + 1, w):
+                xn2 += G[s, j] * G[s, j]
+            if xn2 == 0.0:
+                continue
+            beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
+            t = (beta - alpha) / beta
+            sc = 1.0 / (alpha - beta)
+            for j in range(s + 1, w):
+                G[s, j] *= sc
+            G[s, s] = beta
+            for q in range(s + 1, r + 1):
+                d = G[q, s]
+                for j in range(s + 1, w):
+                    d += G[s, j] * G[q, j]
+                d *= t
+                G[q, s] -= d
+                for j in range(s + 1, w):
+                    G[q, j] -= d * G[s, j]
+        for s in range(r - 1, -1, -1):
+            v = G[r, s]
+            for q in range(s + 1, r):
+                v -= G[q, s] * u[q]
+            u[s] = v / G[s, s]
+
+    @kernel(fast=True)
+    def _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, k0, ws):  # pragma: no cover - compiled
+        """The eHQP of the active rows ``act`` (sub-level ``s``: ``act[lstart[s]:lstart[s+1]]``)
+        from sub-level ``k0`` on (the sub-levels above, their basis rows and points kept from
+        the last call). ``xs[s]``: the point before sub-level ``s``; ``xs[ns]`` the last."""
+        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, x, e, u, G, w = ws
+        n = A.shape[1]
+        ns = lstart.shape[0] - 1
+        ident = k0 == 0
+        if k0 > 0:
+            c = cs[k0]
+            for i in range(c, n):
+                for col in range(n):
+                    Yt[i, col] = Ysave[k0, i, col]
+            for col in range(n):
+                x[col] = xs[k0, col]
+            ident = c == 0  # no direction fixed above: the saved basis is the identity
+        else:
+            for i in range(n):
+                for col in range(n):
+                    Yt[i, col] = 0.0
+                Yt[i, i] = 1.0
+                x[i] = 0.0
+            cs[0] = 0
+        for k in range(k0, ns):
+            c = cs[k]
+            if ident:
+                for i in range(c, n):
+                    for col in range(n):
+                        Ysave[k, i, col] = 0.0
+                    Ysave[k, i, i] = 1.0
+            else:
+                for i in range(c, n):
+                    for col in range(n):
+                        Ysave[k, i, col] = Yt[i, col]
+            for col in range(n):
+                xs[k, col] = x[col]
+            r0 = lstart[k]
+            mk = lstart[k + 1] - r0
+            f = n - c
+            ranks[k] = 0
+            if mk == 0 or f == 0:
+                cs[k + 1] = c
+                continue
+            M = Mw[r0 : r0 + mk]
+            for j in range(mk):
+                row = act[r0 + j]
+                a = A[row]
+                if ident:
+                    for i in range(n):
+                        M[j, i] = a[i]
+                else:
+                    for i in range(f):
+                        M[j, i] = _dot(a, Yt[c + i], n)
+                e[r0 + j] = t[row] - _dot(a, x, n)
+            pv = piv[r0 : r0 + mk]
+            kmin = _pivoted_qr(M, mk, f, tau[k], pv)
+            thr = rank_tol * phis[k]
+            r = 0
+            while r < kmin and abs(M[r, r]) > thr:
+                r += 1
+            ranks[k] = r
+            if r > 0:
+                for j in range(mk):
+                    w[j] = e[r0 + pv[j]]
+                _level_step(M, mk, r, w, lam_sub[k], u, G)
+                _reflect_basis(M, tau[k], r, f, Yt, c, n, w)
+                ident = False
+                for j in range(r):
+                    uj = u[j]
+                    for col in range(n):
+                        x[col] += uj * Yt[c + j, col]
+            cs[k + 1] = c + r
+        for col in range(n):
+            xs[ns, col] = x[col]
+
+    @kernel(fast=True)
+    def _correct(A, t, act, lstart, s, x, ws, out, rhs):  # pragma: no cover - compiled
+        """``out`` = ``x`` plus the least-squares step of (undamped) sub-level ``s`` taken
+        from ``x``, with its factorisation from the last eHQP (see :mod:`._activeset`)."""
+        Yt, _, _, cs, Mw, piv, _, ranks, _, _, u, G, _ = ws
+        n = A.shape[1]
+        for col in range(n):
+            out[col] = x[col]
+        r = ranks[s]
+        if r == 0:
+            return
+        r0 = lstart[s]
+        mk = lstart[s + 1] - r0
+        c = cs[s]
+        for j in range(mk):
+            row = act[r0 + piv[r0 + j]]
+            rhs[j] = t[row] - _dot(A[row], x, n)
+        _level_step(Mw[r0 : r0 + mk], mk, r, rhs, 0.0, u, G)
+        for i in range(r):
+            ui = u[i]
+            for col in range(n):
+                out[col] += ui * Yt[c + i, col]
+
+    @kernel(fast=True)
+    def _multipliers(A, act, lstart, below, g, ws, mu, h, rhs):  # pragma: no cover - compiled
+        """``mu[slot]``: the basic multipliers of the active rows of the sub-levels
+        ``< below`` for the gradient ``g``."""
+        Yt, _, _, cs, Mw, piv, _, ranks, _, _, _, _, _ = ws
+        n = A.shape[1]
+        for col in range(n):
+            h[col] = g[col]
+        for k in range(below - 1, -1, -1):
+            r0 = lstart[k]
+            for q in range(r0, lstart[k + 1]):
+                mu[q] = 0.0
+            r = ranks[k]
+            if r == 0:
+                continue
+            c = cs[k]
+            for i in range(r):
+                rhs[i] = -_dot(Yt[c + i], h, n)
+            for q in range(r - 1, -1, -1):  # R11 v = rhs, R[i, q] = Mw[r0 + q, i]
+                v = rhs[q] / Mw[r0 + q, q]
+                rhs[q] = v
+                for i in range(q):
+                    rhs[i] -= Mw[r0 + q, i] * v
+            for q in range(r):
+                slot = r0 + piv[r0 + q]
+                mu[slot] = rhs[q]
+                a = A[act[slot]]
+                v = rhs[q]
+                for col in range(n):
+                    h[col] += v * a[col]
+
+    @kernel
+    def _gather(A, starts, kind, status, attach, level_of, lo, up, fro, k0, act, slot, lstart,
+                t, phis):  # pragma: no cover - compiled  # fmt: skip
+        """The active rows, sub-level by sub-level (``held_0, own_0, ..., own_{p-1},
+        held_p``), from sub-level ``k0`` on; targets and the sub-levels' norms."""
+        m, n = A.shape
+        p = starts.shape[0] - 1
+        ns = 2 * p + 1
+        nact = lstart[k0]
+        for s in range(k0, ns):
+            lstart[s] = nact
+            j = s // 2
+            if s % 2 == 1:  # own_j: the level's equality rows and own active rows
+                phis[s] = fro[j]
+                for i in range(starts[j], starts[j + 1]):
+                    if kind[i] == EQ or (status[i] != 0 and attach[i] == j):
+                        act[nact] = i
+                        slot[i] = nact
+                        nact += 1
+            else:  # held_j: rows of the levels above held for level j
+                s2 = 0.0
+                for i in range(0, starts[min(j, p)]):
+                    if kind[i] == INEQ and status[i] != 0 and attach[i] == j and level_of[i] < j:
+                        act[nact] = i
+                        slot[i] = nact
+                        nact += 1
+                        for col in range(n):
+                            s2 += A[i, col] * A[i, col]
+                phis[s] = math.sqrt(s2)
+        lstart[ns] = nact
+        for i in range(m):
+            t[i] = up[i] if status[i] > 0 else lo[i]
+        return nact
+
+    @kernel(fast=True)
+    def _ratio(
+        A, x, d, kind, status, attach, level_of, lo, up, anorm, jmax, upto, tol
+    ):  # pragma: no cover
+        """As ``_ratio`` of :mod:`._activeset`, over the inequality rows of the levels
+        ``<= jmax`` that are not active in the sub-levels ``< upto``: ``(tau, row, side)``."""
+        m, n = A.shape
+        dn = math.sqrt(_dot(d, d, n))
+        tau = 1.0
+        blk = -1
+        side = 0
+        if dn == 0.0:
+            return tau, blk, side
+        for i in range(m):
+            if kind[i] != INEQ or level_of[i] > jmax:
+                continue
+            if status[i] != 0:
+                sub = 2 * attach[i] + (1 if attach[i] == level_of[i] else 0)
+                if sub < upto:
+                    continue
+            ad = _dot(A[i], d, n)
+            small = tol * anorm[i] * dn
+            if ad > small and up[i] < math.inf:
+                ti = (up[i] - _dot(A[i], x, n)) / ad
+                sd = 1
+            elif ad < -small and lo[i] > -math.inf:
+                ti = (lo[i] - _dot(A[i], x, n)) / ad
+                sd = -1
+            else:
+                continue
+            ti = max(ti, 0.0)
+            if ti < tau:
+                tau = ti
+                blk = i
+                side = sd
+        return tau, blk, side
+
+    @kernel(fast=True)
+    def _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of, decided, locked,
+                anorm, lam_sub, fro, j, p, eps, dual_tol, ws, mu, h, g, rhs, score,
+                cand):  # pragma: no cover - compiled  # fmt: skip
+        """As ``_verify`` of :mod:`._activeset`: -1 when no judged row is wrong (the kept
+        ones are then decided), else the row released."""
+        n = A.shape[1]
+        below = 2 * j + 1 if j < p else 2 * p + 1
+        xi = 1.0
+        xn = 0.0
+        for col in range(n):
+            xi = max(xi, abs(x[col]))
+            xn += x[col] * x[col]
+        xn = math.sqrt(xn)
+        nc = 0
+        for q in range(lstart[below]):
+            i = act[q]
+            if kind[i] != INEQ or decided[i]:
+                continue
+            if abs(_dot(A[i], x, n) - t[i]) <= eps * (1.0 + anorm[i] * xi):
+                cand[nc] = q
+                nc += 1
+        if nc == 0:
+            return -1
+        if j < p:
+            r0 = lstart[2 * j + 1]
+            r1 = lstart[2 * j + 2]
+            wn = 0.0
+            tn = 0.0
+            for col in range(n):
+                g[col] = 0.0
+            for q in range(r0, r1):
+                i = act[q]
+                wq = _dot(A[i], x, n) - t[i]
+                wn += wq * wq
+                tn += t[i] * t[i]
+                a = A[i]
+                for col in range(n):
+                    g[col] += wq * a[col]
+            wn = math.sqrt(wn)
+            if wn <= eps * (1.0 + fro[j] * xn + math.sqrt(tn)):
+                return -1  # the level is met: no gradient
+            gscale = fro[j] * wn
+            lam = lam_sub[2 * j + 1]
+            if lam != 0.0:  # the damping's gradient, lambda^2 x
+                sn = 0.0
+                for col in range(n):
+                    g[col] += lam * lam * xj[col]
+                    sn += xj[col] * xj[col]
+                gscale += lam * lam * math.sqrt(sn)
+        else:
+            if xn == 0.0:
+                return -1
+            for col in range(n):
+                g[col] = x[col]
+            gscale = xn
+        _multipliers(A, act, lstart, below, g, ws, mu, h, rhs)
+        best = -1
+        bs = -1.0
+        for k in range(nc):
+            q = cand[k]
+            i = act[q]
+            li = mu[q] * anorm[i] / gscale
+            score[k] = li
+            if abs(li) > dual_tol and status[i] * li < 0.0 and not locked[i] and abs(li) > bs:
+                bs = abs(li)
+                best = i
+        if best >= 0:
+            status[best] = 0
+            return best
+        for k in range(nc):
+            i = act[cand[k]]
+            if abs(score[k]) > dual_tol and status[i] * score[k] > 0.0:
+                decided[i] = True
+        return -1
+
+    @kernel(fast=True)
+    def _solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter,
+               budget, x_out, res, ranks_out, fro, info):  # pragma: no cover  # fmt: skip
+        clock = np.zeros(2, dtype=np.int64)
+        start = _cpu_time(clock)
+        m, n = A.shape
+        p = starts.shape[0] - 1
+        ns = 2 * p + 1
+        for q in range(info.shape[0]):
+            info[q] = 0
+        x = np.zeros(n)
+        for col in range(n):
+            x_out[col] = 0.0
+        for k in range(p):
+            res[k] = 0.0
+            ranks_out[k] = 0
+        # the input: checks, norms, row kinds
+        level_of = np.empty(m, dtype=np.int64)
+        kind = np.empty(m, dtype=np.int8)
+        anorm = np.empty(m)
+        for k in range(p):
+            s2 = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                level_of[i] = k
+                a2 = 0.0
+                for col in range(n):
+                    a2 += A[i, col] * A[i, col]
+                anorm[i] = math.sqrt(a2)
+                s2 += a2
+            fro[k] = math.sqrt(s2)
+        for i in range(m):
+            if not math.isfinite(anorm[i]):
+                info[3] = NONFINITE_MATRIX
+                info[4] = i
+                for col in range(n):
+                    if not math.isfinite(A[i, col]):
+                        info[5] = col
+                        break
+                return
+        for i in range(m):
+            if math.isnan(lo[i]) or math.isnan(up[i]):
+                info[3] = NAN_BOUND
+                info[4] = i
+                return
+        for i in range(m):
+            if lo[i] > up[i]:
+                info[3] = CROSSED_BOUNDS
+                info[4] = i
+                return
+        for i in range(m):
+            if lo[i] == up[i] and not math.isfinite(lo[i]):
+                info[3] = INFINITE_EQUALITY
+                info[4] = i
+                return
+        for i in range(m):
+            if lo[i] == up[i]:
+                kind[i] = EQ
+            elif lo[i] > -math.inf or up[i] < math.inf:
+                kind[i] = INEQ
+            else:
+                kind[i] = FREE
+            if kind[i] != INEQ:
+                status[i] = 0
+            if status[i] == 0 or attach[i] < level_of[i] or attach[i] > p:
+                attach[i] = level_of[i]
+        undamped = True
+        lam_sub = np.zeros(ns)
+        for k in range(p):
+            lam_sub[2 * k + 1] = lams[k]
+            if lams[k] != 0.0:
+                undamped = False
+        move_tol = max(eps, 2.0 * rank_tol)
+        # workspace
+        act = np.empty(max(m, 1), dtype=np.int64)
+        slot = np.full(max(m, 1), -1, dtype=np.int64)
+        lstart = np.zeros(ns + 1, dtype=np.int64)
+        t = np.empty(max(m, 1))
+        phis = np.zeros(ns)
+        ws = (
+            np.empty((n, n)),  # Yt: a row per direction, the last ones Z^T
+            np.empty((ns, n, n)),  # Ysave: Yt's rows left before each sub-level
+            np.empty((ns + 1, n)),  # xs: the point before each sub-level
+            np.zeros(ns + 1, dtype=np.int64),  # cs: first basis row of each sub-level
+            np.empty((max(m, 1), n)),  # Mw: each sub-level's factored rows
+            np.empty(max(m, 1), dtype=np.int64),  # piv
+            np.empty((ns, n)),  # tau
+            np.zeros(ns, dtype=np.int64),  # ranks
+            np.zeros(n),  # x of the recursion
+            np.empty(max(m, 1)),  # e
+            np.empty(n),  # u
+            np.empty((n + 1, m + n)),  # G
+            np.empty(max(m, n)),  # w
+        )
+        xs = ws[2]
+        sub_ranks = ws[7]
+        xj = np.zeros(n)
+        xp = np.zeros(n)
+        tmp = np.zeros(n)
+        d = np.zeros(n)
+        rhs = np.empty(max(m, n))
+        mu = np.zeros(max(m, 1))
+        h = np.empty(n)
+        g = np.empty(n)
+        score = np.zeros(max(m, 1))
+        cand = np.zeros(max(m, 1), dtype=np.int64)
+        decided = np.zeros(max(m, 1), dtype=np.bool_)
+        locked = np.zeros(max(m, 1), dtype=np.bool_)
+        longest = 0.0
+        reason = OPTIMAL
+        solved = p + 1
+        # the first phase starts at the eHQP point of the previous call's active rows
+        _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
+                t, phis)  # fmt: skip
+        _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws)
+        its = 1
+        for col in range(n):
+            x[col] = xs[ns, col]
+        stale = False
+        dirty = ns  # the first sub-level whose rows changed since the last eHQP
+        for j in range(p + 1):
+            upto = 2 * j + 2 if j < p else ns
+            jmax = min(j, p - 1)
+            released = -1
+            if j < p:  # level j's rows violated where the phase starts join its least squares
+                xi = 1.0
+                for col in range(n):
+                    xi = max(xi, abs(x[col]))
+                for i in range(starts[j], starts[j + 1]):
+                    if kind[i] != INEQ or (status[i] != 0 and attach[i] <= j):
+                        continue
+                    v = _dot(A[i], x, n)
+                    tol = eps * (1.0 + anorm[i] * xi)
+                    if v > up[i] + tol or v < lo[i] - tol:
+                        status[i] = 1 if v > up[i] + tol else -1
+                        attach[i] = j
+                        dirty = min(dirty, 2 * j + 1)
+                        stale = True
+            while True:
+                if stale:
+                    now = _cpu_time(clock)
+                    if its >= max_iter or now - start + longest > budget:
+                        reason = ITERATIONS if its >= max_iter else TIME
+                        break
+                    _gather(A, starts, kind, status, attach, level_of, lo, up, fro,
+                                   dirty, act, slot, lstart, t, phis)  # fmt: skip
+                    _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, ws)
+                    its += 1
+                    longest = max(longest, _cpu_time(clock) - now)
+                    stale = False
+                    dirty = ns
+                # held rows that depend on the rows above them leave
+                s = 2 * j
+                mk = lstart[s + 1] - lstart[s]
+                if sub_ranks[s] < mk:
+                    piv = ws[5]
+                    r0 = lstart[s]
+                    for q in range(sub_ranks[s] if n - ws[3][s] > 0 else 0, mk):
+                        status[act[r0 + piv[r0 + q]] if n - ws[3][s] > 0 else act[r0 + q]] = 0
+                    dirty = min(dirty, s)
+                    stale = True
+                    continue
+                # the phase's target (see _activeset)
+                if j < p and lam_sub[2 * j + 1] != 0.0:  # damped: the recursion's point
+                    for col in range(n):
+                        xj[col] = xs[2 * j + 2, col]
+                        xp[col] = xj[col]
+                elif j < p:
+                    _correct(A, t, act, lstart, 2 * j, x, ws, tmp, rhs)
+                    _correct(A, t, act, lstart, 2 * j + 1, tmp, ws, xj, rhs)
+                    for col in range(n):
+                        xp[col] = xj[col]
+                    if undamped:
+                        for s2 in range(2 * j + 2, ns):
+                            _correct(A, t, act, lstart, s2, xp, ws, tmp, rhs)
+                            for col in range(n):
+                                xp[col] = tmp[col]
+                else:
+                    for col in range(n):
+                        xj[col] = xs[ns, col]
+                        xp[col] = xs[ns, col]
+                blocked = False
+                for part in range(2):
+                    hold = j + part
+                    for col in range(n):
+                        d[col] = (xj[col] if part == 0 else xp[col]) - x[col]
+                    tau, i, side = _ratio(A, x, d, kind, status, attach, level_of, lo, up,
+                                          anorm, jmax, upto, move_tol)  # fmt: skip
+                    for col in range(n):
+                        x[col] += tau * d[col]
+                    if i < 0:
+                        continue
+                    if i == released and tau == 0.0:
+                        locked[i] = True  # released and blocked at once: not again ...
+                    else:
+                        for q in range(m):
+                            locked[q] = False  # ... until something else changes
+                    xi = 1.0
+                    for col in range(n):
+                        xi = max(xi, abs(x[col]))
+                    for q in range(m):  # unmet held rows of that sub-level leave
+                        if status[q] != 0 and attach[q] == hold and level_of[q] < hold:
+                            tq = up[q] if status[q] > 0 else lo[q]
+                            if abs(_dot(A[q], x, n) - tq) > eps * (1.0 + anorm[q] * xi):
+                                status[q] = 0
+                    status[i] = side
+                    attach[i] = hold
+                    dirty = min(dirty, 2 * min(hold, level_of[i]))
+                    released = -1
+                    stale = True
+                    blocked = True
+                    break
+                if blocked:
+                    dirty = min(dirty, 2 * j)
+                    continue
+                if j < p:  # own_j's rows beyond the other bound flip, strictly inside leave
+                    xi = 1.0
+                    for col in range(n):
+                        xi = max(xi, abs(x[col]))
+                    flipped = False
+                    inside = False
+                    for i in range(starts[j], starts[j + 1]):
+                        if kind[i] != INEQ or status[i] == 0 or attach[i] != j:
+                            continue
+                        v = _dot(A[i], x, n)
+                        tol = eps * (1.0 + anorm[i] * xi)
+                        if (status[i] > 0 and v < lo[i] - tol) or (
+                            status[i] < 0 and v > up[i] + tol
+                        ):
+                            status[i] = -status[i]
+                            flipped = True
+                        elif (status[i] > 0 and v < up[i] - tol) or (
+                            status[i] < 0 and v > lo[i] + tol
+                        ):
+                            inside = True
+                    if inside:
+                        for i in range(starts[j], starts[j + 1]):
+                            if kind[i] != INEQ or status[i] == 0 or attach[i] != j:
+                                continue
+                            v = _dot(A[i], x, n)
+                            tol = eps * (1.0 + anorm[i] * xi)
+                            if (status[i] > 0 and v < up[i] - tol) or (
+                                status[i] < 0 and v > lo[i] + tol
+                            ):
+                                status[i] = 0
+                    if flipped or inside:
+                        dirty = min(dirty, 2 * j + 1)
+                        stale = True
+                        continue
+                verdict = _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of,
+                                  decided, locked, anorm, lam_sub, fro, j, p, eps, dual_tol, ws,
+                                  mu, h, g, rhs, score, cand)  # fmt: skip
+                if verdict < 0:
+                    break
+                released = verdict
+                ss = 2 * attach[verdict] + (1 if attach[verdict] == level_of[verdict] else 0)
+                dirty = min(dirty, ss)
+                stale = True
+            if reason != OPTIMAL:
+                solved = j
+                break
+        if reason != OPTIMAL:
+            # the last step: every level's active rows, up to the first row of the levels
+            # <= solved that it would leave
+            _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
+                    t, phis)  # fmt: skip
+            _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws)
+            its += 1
+            for col in range(n):
+                d[col] = xs[ns, col] - x[col]
+            tau, _i, _s = _ratio(A, x, d, kind, status, attach, level_of, lo, up, anorm,
+                                 min(solved, p - 1), ns + 1, move_tol)  # fmt: skip
+            for col in range(n):
+                x[col] += tau * d[col]
+        # the result
+        finite = True
+        for col in range(n):
+            x_out[col] = x[col]
+            if not math.isfinite(x[col]):
+                finite = False
+        if not finite:
+            info[3] = NONFINITE_RESULT
+        for k in range(p):
+            s2 = 0.0
+            for i in range(starts[k], starts[k + 1]):
+                v = _dot(A[i], x, n)
+                if v < lo[i]:
+                    s2 += (lo[i] - v) * (lo[i] - v)
+                elif v > up[i]:
+                    s2 += (v - up[i]) * (v - up[i])
+            res[k] = math.sqrt(s2)
+            ranks_out[k] = sub_ranks[2 * k] + sub_ranks[2 * k + 1]
+        nin = 0
+        for i in range(m):
+            if kind[i] == INEQ and status[i] != 0:
+                nin += 1
+        info[0] = its
+        info[1] = reason
+        info[2] = solved
+        info[6] = nin
+
+    solve = _solve
+
+
+def warm_up() -> None:
+    """Compile the kernel for the argument types the solver passes (or load it from
+    numba's cache), then forbid further compilation: a call with other types raises
+    ``TypeError`` (the solver then uses the NumPy twin) instead of stalling a tick."""
+    if solve is None or _solve.signatures:  # type: ignore[union-attr]
+        return
+    n = 3
+    A = np.eye(n)
+    lo, up = -np.ones(n), np.ones(n)
+    starts = np.array([0, 1, n], dtype=np.int64)
+    status = np.zeros(n, dtype=np.int8)
+    attach = np.zeros(n, dtype=np.int64)
+    out = (np.empty(n), np.empty(2), np.empty(2, dtype=np.int64), np.empty(2))
+    info = np.empty(7, dtype=np.int64)
+    _solve(A, lo, up, starts, status, attach, np.zeros(2), 1e-9, 1e-9, 1e-9, 10, math.inf,
+           *out, info)  # fmt: skip
+    _solve.disable_compile()
