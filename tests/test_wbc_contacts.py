@@ -123,9 +123,9 @@ def test_bilateral_contact_against_pinocchio_constraint_dynamics(talos, strategy
     tau_full = np.concatenate([np.zeros(6), sol.tau])
     a = pin.constraintDynamics(model, data, q, v, tau_full, models, datas, prox)
     assert np.allclose(a, sol.a, atol=1e-6 * (1 + np.abs(a).max()))
-    # the interaction wrench is not zero (the loop carries the pull) and closes the EoM
+    # the interaction wrench (whatever split of the internal force the regularisation
+    # chose: the loop is statically indeterminate) closes the equations of motion
     f_loop = sol.f[12:18]
-    assert np.linalg.norm(f_loop) > 1.0
     M = pin.crba(model, data, q)
     M = np.triu(M) + np.triu(M, 1).T
     b = pin.nonLinearEffects(model, data, q, v)

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sotpy.errors import SotpyError
+from sotpy.errors import SotpyError, SotpyWarning
 from sotpy.solvers.wbc import (
     CartesianAccelerationTask,
     CoMAccelerationTask,
@@ -302,7 +302,8 @@ def test_activation_ramp_and_callbacks(panda):
     t.setCallback("onComputeBegin", lambda tt, dt: log.append("begin"))
     t.setCallback("onComputeEnd", lambda tt, dt: log.append("end"))
     q, v = panda.q0.copy(), np.zeros(9)
-    w.update(q, v)  # inactive: no callback
+    with pytest.warns(SotpyWarning, match="nothing is active"):
+        w.update(q, v)  # inactive: no callback, and a warning
     assert log == [] and t.ramp == 0.0
     w.activateTasksAndConstraints()
     ramps = []
@@ -315,6 +316,8 @@ def test_activation_ramp_and_callbacks(panda):
     assert log[7] == "onActivated" and log.count("onActivated") == 1
     w.deactivateTasksAndConstraints()
     while not w.tasksAndConstraintsDeactivated():
+        w.update(q, v, dt=0.001)
+    with pytest.warns(SotpyWarning, match="nothing is active"):
         w.update(q, v, dt=0.001)
     assert log[-1] == "onDeactivated" and "onDeactivation" in log and t.ramp == 0.0
     with pytest.raises(SotpyError, match="unknown callback"):

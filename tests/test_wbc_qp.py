@@ -19,9 +19,10 @@ from sotpy.solvers.wbc import (
     WholeBodyController,
     _kernels,
 )
-from sotpy.solvers.wbc.qp import WeightedQP
+from sotpy.solvers.wbc.model import Layout
+from sotpy.solvers.wbc.qp import DUAL_TOL, PRIMAL_TOL, WeightedQP, pack
 
-NO_NUMBA = pytest.mark.skipif(_kernels.reduce is None, reason="numba missing or SOTPY_JIT=0")
+NO_NUMBA = pytest.mark.skipif(_kernels.solve is None, reason="numba missing or SOTPY_JIT=0")
 JIT = [False, pytest.param(True, marks=NO_NUMBA)]
 
 
@@ -35,11 +36,18 @@ def panda():
     return erd.load("panda")
 
 
+def _reg(w: WholeBodyController) -> np.ndarray:
+    """The regularisation's diagonal over chi: eps on (a, f), 0 on the torques."""
+    d = np.full(w.layout.n, w.regularisation)
+    d[w.layout.tau] = 0.0
+    return d
+
+
 def reference_chi(w: WholeBodyController) -> tuple[np.ndarray, float]:
     """The QP over chi (dynamics as equalities), by proxsuite; returns (chi, objective)."""
     (A, c), (C, lo, hi), tasks = w.problem()
     n = w.layout.n
-    H = w.regularisation * np.eye(n)
+    H = np.diag(_reg(w))
     g = np.zeros(n)
     for _l, E, f, wt in tasks:
         H += E.T @ (wt[:, None] * E)
@@ -56,7 +64,7 @@ def reference_chi(w: WholeBodyController) -> tuple[np.ndarray, float]:
 
 def objective(w: WholeBodyController, chi: np.ndarray) -> float:
     _dyn, _cons, tasks = w.problem()
-    val = 0.5 * w.regularisation * chi @ chi
+    val = 0.5 * chi @ (_reg(w) * chi)
     for _l, E, f, wt in tasks:
         r = E @ chi - f
         val += 0.5 * r @ (wt * r)
@@ -79,6 +87,7 @@ def _talos(talos, jit: bool, effort_scale: float = 1.0) -> WholeBodyController:
     w.addTask(JointAccelerationTask("posture", w.robot.na, 1e-2))
     eff = talos.model.effortLimit[6:] * effort_scale
     w.addConstraint(JointTorqueLimit("tau", w.robot, -eff, eff))
+    w.setTorqueRateLimit(np.inf)  # the QP alone: no transition rows (test_wbc_ramps.py)
     w.activateTasksAndConstraints()
     return w
 
@@ -143,32 +152,58 @@ def test_wrong_guess_is_refused(talos, jit):
     assert np.array_equal(np.sort(qp._active), np.sort(good))
 
 
+def _compiled(layout, A, c, E, f, w, C, lo, hi, reg, act=(), up=(), guess=True):
+    """The compiled kernel on these rows: (status, ok, {name: array}) of its workspace."""
+    m, mc = E.shape[0], C.shape[0]
+    data = pack(layout, A, c, E, f, w, C, lo, hi)
+    lay = _kernels.work_layout(layout.nv, layout.na, layout.n, m, mc)
+    ws = np.zeros(lay["size"][0])
+    act = np.asarray(act, dtype=np.intp)
+    up = np.asarray(up, dtype=bool)
+    status, ok = _kernels.solve(
+        data, ws, act, up, layout.nv, layout.na, layout.n, m, mc, reg, guess,
+        PRIMAL_TOL, DUAL_TOL, 1e6,
+    )  # fmt: skip
+    views = {k: ws[o : o + int(np.prod(sh))].reshape(sh) for k, (o, sh) in lay.items() if sh}
+    return status, ok, views
+
+
+_REDUCED = ("H", "g", "Au", "cu", "Cy", "lo_y", "hi_y", "Tt", "tt")
+
+
+def _assert_same(ref, got):
+    for a, name in zip(ref, _REDUCED, strict=True):
+        b = got[name]
+        assert a.shape == b.shape, name
+        assert np.array_equal(np.isinf(a), np.isinf(b)), name  # one-sided rows stay so
+        fa, fb = a[np.isfinite(a)], b[np.isfinite(a)]
+        assert np.allclose(fa, fb, rtol=1e-12, atol=1e-12 * (1 + np.abs(fa).max(initial=0))), name
+
+
 @NO_NUMBA
 def test_kernels_match_numpy(panda, talos):
-    """The compiled reduction and guess equal the NumPy code (torque task included)."""
+    """The compiled reduction and guess equal the NumPy code (torque task included: its
+    rows couple the forces to the accelerations, so the Hessian has no zero block)."""
     w = _talos(talos, False, effort_scale=0.12)
     w.addTask(TorqueTask("tq", w.robot.na, 1e-3)).activate()
     w.tasks["tq"].setDesired(np.linspace(-5.0, 5.0, w.robot.na))
     w.update(talos.q0.copy(), np.zeros(talos.model.nv))
     w.update(talos.q0.copy(), np.zeros(talos.model.nv))
-    dyn, cons, tasks = w.problem()
+    (A, c), (C, lo, hi), tasks = w.problem()
     qp_np = w.weighted_qp
-    qp_jit = WeightedQP(w.robot.actuated, w._unactuated, jit=True)
-    ref = qp_np.reduce(w.layout, dyn, cons, tasks, w.regularisation)
-    status, got = qp_jit._reduce_compiled(w.layout, dyn, cons, tasks, w.regularisation)
-    assert status == 0
-    for a, b in zip(ref, got, strict=True):
-        assert a.shape == b.shape
-        assert np.array_equal(np.isinf(a), np.isinf(b))  # one-sided rows stay so
-        fa, fb = a[np.isfinite(a)], b[np.isfinite(a)]
-        assert np.allclose(fa, fb, rtol=1e-12, atol=1e-12 * (1 + np.abs(fa).max(initial=0)))
-    H, g, Au, cu, Cy, lo, hi, _Tt, _tt = ref
-    y_np = qp_np._try_guess(H, g, Au, cu, Cy, lo, hi, lo == hi)
-    ok, y_jit = _kernels.guess(
-        H, g, Au, cu, Cy, lo, hi, qp_np._active, qp_np._upper, 1e-9, 1e-9, 1e6
+    E = np.vstack([t[1] for t in tasks])
+    f = np.concatenate([t[2] for t in tasks])
+    wt = np.concatenate([t[3] for t in tasks])
+    ref = qp_np.reduce(w.layout, (A, c), (C, lo, hi), tasks, w.regularisation)
+    status, ok, got = _compiled(
+        w.layout, A, c, E, f, wt, C, lo, hi, w.regularisation, qp_np._active, qp_np._upper
     )
-    assert y_np is not None and ok
-    assert np.allclose(y_np, y_jit, rtol=1e-10, atol=1e-10 * (1 + np.abs(y_np).max()))
+    assert status == 0
+    _assert_same(ref, got)
+    H, g, Au, cu, Cy, lo_y, hi_y, _Tt, _tt = ref
+    y_np = qp_np._try_guess(H, g, Au, cu, Cy, lo_y, hi_y, lo == hi)
+    assert y_np is not None and ok and len(qp_np._active)
+    assert np.allclose(y_np, got["y"], rtol=1e-10, atol=1e-10 * (1 + np.abs(y_np).max()))
 
 
 @pytest.mark.parametrize("jit", JIT)
@@ -178,6 +213,7 @@ def test_fixed_base_and_bad_bounds(panda, jit):
     w.weighted_qp = WeightedQP(w.robot.actuated, w._unactuated, jit=jit)
     w.addTask(CartesianAccelerationTask("ee", "panda_hand_tcp")).setDesired([50.0, 0, 0, 0, 0, 0])
     lim = w.addConstraint(JointTorqueLimit("tau", w.robot, -np.full(9, 5.0), np.full(9, 5.0)))
+    w.setTorqueRateLimit(np.inf)
     w.activateTasksAndConstraints()
     q, v = panda.q0.copy(), np.zeros(model.nv)
     for _ in range(3):
@@ -191,15 +227,28 @@ def test_fixed_base_and_bad_bounds(panda, jit):
     assert not sol.found and "NaN" in sol.reason
 
 
+class _Var:
+    """A one-dimensional 'contact' of a toy layout: its variable is y's second entry."""
+
+    key = frame = "x"
+    dim = 1
+    bilateral = True
+
+
 def _guess(jit: bool, H, g, Au, cu, Cy, lo, hi, act, up):
-    """(accepted, y) of the guessed active set, NumPy or compiled."""
+    """(accepted, y) of the guessed active set, NumPy or compiled. The toy problems have
+    two variables and one equality: as a layout, nv = 1 (one unactuated velocity), no
+    torque, one 'contact' variable; the dynamics row is the equality, a task of weight 1
+    on each variable gives ``H = I`` and ``g`` (plus eps = 1e-14)."""
     act = np.asarray(act, dtype=np.intp)
     up = np.asarray(up, dtype=bool)
     if jit:
-        try:
-            return _kernels.guess(H, g, Au, cu, Cy, lo, hi, act, up, 1e-9, 1e-9, 1e6)
-        except np.linalg.LinAlgError:
-            return False, None
+        assert np.allclose(H, np.eye(2)) and Au.shape == (1, 2)
+        layout = Layout(1, 0, [_Var()])
+        _status, ok, got = _compiled(
+            layout, Au, cu, np.eye(2), -g, np.ones(2), Cy, lo, hi, 1e-14, act, up
+        )
+        return ok, got["y"].copy()
     qp = WeightedQP(np.arange(0), np.arange(0), jit=False)
     qp._active, qp._upper = act, up
     y = qp._try_guess(H, g, Au, cu, Cy, lo, hi, lo == hi)
@@ -240,9 +289,10 @@ def test_guess_accepts_only_the_optimum(jit):
     # the same guess on the upper side of row 0 at 1.2: the optimum
     ok, _ = _guess(jit, H, g, Au, cu, Cy, lo2, hi, [0], [True])
     assert ok
-    # the same row twice: singular KKT matrix -> refused (never a garbage point)
-    ok, _ = _guess(jit, H, g, Au, cu, Cy, lo, hi, [0, 0], [True, True])
-    assert not ok
+    # the same row twice: a singular KKT matrix; refused, or (the compiled range-space
+    # solve, whose multipliers split between the copies) the optimum: never another point
+    ok, y = _guess(jit, H, g, Au, cu, Cy, lo, hi, [0, 0], [True, True])
+    assert not ok or np.allclose(y, [1.2, -0.2], atol=1e-9)
 
 
 @NO_NUMBA
@@ -250,8 +300,6 @@ def test_guess_accepts_only_the_optimum(jit):
 def test_compiled_reduction_of_random_rows(dense):
     """Random dynamics, tasks and constraints (torque columns sparse or dense): the
     compiled reduction equals the NumPy one."""
-    from sotpy.solvers.wbc.model import Layout
-
     rng = np.random.default_rng(5 + dense)
     nv, na = 9, 6
     layout = Layout(nv, na, [])
@@ -265,16 +313,15 @@ def test_compiled_reduction_of_random_rows(dense):
         E[2, nv + 1] = 1.5  # one torque entry
         C[:, nv : nv + na] = 0.0
         C[np.arange(3), nv + np.arange(3)] = 1.0  # torque-limit-like rows
-    tasks = [(0, E[:4], rng.standard_normal(4), rng.uniform(0.1, 2.0, 4)),
-             (1, E[4:], rng.standard_normal(3), rng.uniform(0.1, 2.0, 3))]  # fmt: skip
+    f = rng.standard_normal(7)
+    wt = rng.uniform(0.1, 2.0, 7)
     lo = -rng.uniform(0.5, 1.0, 5)
     hi = rng.uniform(0.5, 1.0, 5)
     lo[4] = -np.inf
-    qp = WeightedQP(np.arange(nv - na, nv), np.arange(nv - na), jit=True)
-    ref = qp.reduce(layout, (A, c), (C, lo, hi), tasks, 1e-3)
-    status, got = qp._reduce_compiled(layout, (A, c), (C, lo, hi), tasks, 1e-3)
+    qp = WeightedQP(np.arange(nv - na, nv), np.arange(nv - na), jit=False)
+    ref = qp.reduce(
+        layout, (A, c), (C, lo, hi), [(0, E[:4], f[:4], wt[:4]), (1, E[4:], f[4:], wt[4:])], 1e-3
+    )
+    status, _ok, got = _compiled(layout, A, c, E, f, wt, C, lo, hi, 1e-3, guess=False)
     assert status == 0
-    for a, b in zip(ref, got, strict=True):
-        assert np.array_equal(np.isinf(a), np.isinf(b))
-        fa, fb = a[np.isfinite(a)], b[np.isfinite(a)]
-        np.testing.assert_allclose(fb, fa, rtol=1e-12, atol=1e-12 * (1 + np.abs(fa).max()))
+    _assert_same(ref, got)

@@ -100,6 +100,12 @@ class RemoteTimeout(KeyboardInterrupt):
         )
 
 
+class ContactError(SotpyError, ValueError):
+    """A floor contact setting or an input of the contact simulation is invalid (a
+    negative friction coefficient, a non-finite wrench, an unknown frame); nothing is
+    changed."""
+
+
 class RobotError(SotpyError):
     """Loading or describing a robot failed."""
 

@@ -44,7 +44,7 @@ def run_panda_torque(
     ctrl.addJointVelocityLimits("vlim", 0.02)
     ctrl.setResolutionStrategy(strategy)
 
-    traj = _servoed_pose(
+    traj, _servo = _servoed_pose(
         f"{prefix}_traj", f"{prefix}_servo", dt, 400.0, ctrl, "ee", "eePose", "eeVelocity"
     )
     jservo = JointServo(f"{prefix}_jservo")
@@ -103,96 +103,137 @@ def _local_wrench(R: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.concatenate([R.T @ w[:3], R.T @ w[3:]])
 
 
+#: Phases of ``run_talos_torque``: (name, what happens).
+TALOS_PHASES = (
+    ("shift", "the CoM moves over the stance foot (min-jerk)"),
+    ("ramp", "the hand task is activated (ramped in) where the hand is"),
+    ("reach", "the right hand reaches by hand_offset (min-jerk), the CoM stays"),
+    ("back", "the CoM moves back to its start, the hand stays at its goal"),
+    ("settle", "everything holds"),
+)
+
+
 def run_talos_torque(
-    duration: float = 1.5,
+    duration: float = 1.0,
     settle: float = 0.5,
     dt: float = 0.001,
     side: str = "left",
-    hand_offset: tuple[float, float, float] = (0.15, 0.1, 0.1),
+    hand_offset: tuple[float, float, float] = (0.15, 0.0, 0.05),
     mu: float = 0.5,
     sole_margin: float = 0.01,
+    fmin: float = 40.0,
+    contact_gains: tuple[float, float] = (100.0, 20.0),
     hand_weight: float = 10.0,
+    hand_ramp: float = 0.2,
+    pid: tuple[float, float] = (300.0, 1e-3),
     strategy: str = "OneLevelWeighted",
+    contacts: str = "floor",
+    floor: Any = None,
     plot: str | Path | None = None,
     prefix: str = "talos_torque",
 ) -> dict[str, Any]:
-    """Talos stands on both feet, shifts its CoM over one foot and reaches with its right
-    hand, in torque mode (the Device simulates the feet as welded 6-D contacts).
+    """Talos on both feet, in torque mode on a floor: it shifts its CoM over one foot,
+    reaches with its right hand, and shifts back.
 
-    The controller (``strategy``, ``OneLevelWeighted`` by default) has two unilateral
-    6-D foot contacts (friction pyramid ``mu``; the CoP inside the soles of
-    ``robot.feet`` shrunk by ``sole_margin`` (m) on every side, a safety margin), a CoM
-    task (weight 10, min-jerk reference from the start to the ``side`` sole's centre,
-    same height, in ``duration`` s, PD ``Kp = 100 1/s^2``), a right-wrist Cartesian task
-    (weight ``hand_weight``, min-jerk from the start to start + ``hand_offset`` (m,
-    world), orientation kept, PD ``Kp = 100``), a posture task (weight 1e-2, half-sitting
-    clipped 1 mrad inside the joint limits (the grippers rest on theirs), ``Kp = 25``),
-    torque limits and joint position limits (horizon 0.05 s); then ``settle`` s at the
-    goals. ``dt``: control period and simulation step (s).
+    The story (``TALOS_PHASES``): the CoM moves in ``duration`` s from its start to the
+    ``side`` sole's centre (same height); the hand task, off until then, is activated
+    with a ramp of ``hand_ramp`` s where the hand is; the hand moves by ``hand_offset``
+    (m, world, orientation kept) in ``duration`` s; the CoM moves back in ``duration``
+    s; then ``settle`` s. ``dt``: control period and simulation step (s).
+
+    The robot: ``contacts="floor"`` (default) stands the Device on a floor
+    (:class:`~sotpy.dynamics.contact.Floor`, ``floor`` or ``Floor()``: friction 0.8;
+    the soles' four corners touch it, MuJoCo simulates it); ``"welded"`` welds the feet
+    (Pinocchio's constrained dynamics, the previous simulation).
+
+    The controller (``strategy``): two unilateral 6-D foot contacts (friction ``mu``,
+    8-facet pyramids, the CoP ``sole_margin`` (m) inside the real soles of
+    ``robot.feet``, normal force >= ``fmin`` (N), the soles' pose and velocity fed back
+    with ``contact_gains`` (Kp 1/s^2, Kd 1/s)), the default contact wrench distribution
+    cost, a CoM task (weight 10, min-jerk reference, PD Kp = 100 1/s^2), a right-wrist
+    task (weight ``hand_weight``, PD Kp = 100), a posture task (weight 1e-2, half-sitting
+    clipped 1 mrad inside the joint limits, Kp = 25), torque limits and joint position
+    limits (horizon 0.05 s); transitions bounded in torque rate (the default, each
+    joint's effort limit per 0.1 s).
 
     The returned checks are computed from the simulation, independently of the
-    controller's own rows (``tests/test_wbc_talos.py`` asserts them):
+    controller's rows (``tests/test_wbc_talos.py`` asserts them):
 
-    * ``feet_drift`` (m, largest translation of a sole from its start) and
-      ``feet_rotation`` (rad): the sole placements by Pinocchio from the device's state;
-    * from the Device's contact wrenches (the simulated ones, world axes at the sole
-      origin, rotated into the sole frame), over the whole run: ``min_fz`` (N),
-      ``friction_ratio`` (max of ``sqrt(fx^2 + fy^2) / (mu fz)``, <= 1 inside the
-      cone), ``cop_margin`` (m, the smallest distance of a CoP inside its *real* sole
-      rectangle, < 0 outside), ``torsion_ratio`` (max ``|tz| / (mu min(L, W)/2 fz)``);
-    * ``com_error`` (m, horizontal distance of the CoM to its goal at the end),
-      ``hand_error`` (m, wrist position to its goal at the end);
+    * ``feet_slide`` (m, largest horizontal displacement of a sole from its start),
+      ``feet_lift`` (m, largest vertical one), ``feet_tilt`` (rad, largest rotation):
+      the sole placements by Pinocchio from the device's state, every tick;
+    * from the simulator's own contact forces (each sole's wrench, rotated into the sole
+      frame), every tick: ``min_fz`` (N, smallest normal force of a sole),
+      ``min_point_force`` (N, smallest normal force of a corner; floor only),
+      ``friction_ratio`` (max ``|f_t| / (mu f_z)``, ``mu`` the controller's),
+      ``cop_margin`` (m, the smallest distance of a CoP inside its real sole, < 0
+      outside);
+    * ``max_rate_ratio``: the largest ``|tau_k - tau_{k-1}| / (rate dt)`` over the
+      ticks of the hand's activation ramp, ``rate`` each
+      joint's effort limit per 0.1 s (Pinocchio's model, the documented bound): <= 1;
+    * ``com_tracking`` and ``hand_tracking`` (m): the largest distance to the moving
+      reference (CoM: horizontal, over the run; hand: from the end of its ramp);
+      ``com_error`` (m, horizontal CoM to its start at the end) and ``hand_error``
+      (m, wrist to its goal at the end);
     * ``max_torque_ratio`` (max ``|tau| / effort limit``), ``solution_found`` (at every
-      tick), ``max_wrench_mismatch`` (N or N m: the controller's wrenches vs the
-      simulated ones of the same tick).
+      tick), ``max_wrench_mismatch`` (N or N m, the controller's wrenches against the
+      simulated ones of the same tick), ``ok`` and ``summary`` (one line).
 
-    Returns these and the arrays ``times`` (n, s), ``com`` (n x 3, m), ``com_goal`` (3),
-    ``wrenches`` (n x 2 x 6: left then right sole, sole frame, force then torque),
-    ``torques`` (n x na, N m), and ``plot`` (the PNG path or None: normal and
-    tangential forces, CoPs, CoM).
+    Returns these and the arrays ``times`` (n, s), ``com`` and ``com_ref`` (n x 3, m),
+    ``com_goal`` (3, the shift's goal), ``wrenches`` (n x 2 x 6: left then right sole,
+    sole frame, force then torque, simulated), ``torques`` (n x na, N m),
+    ``torque_limits`` (na), ``joint_names``, ``phases`` (name -> (start, end) s), and
+    ``plot`` (the PNG path or None: contact forces, CoPs, torques against their limits,
+    CoM).
     """
     from ..dynamics import load_robot
+    from ..dynamics.contact import Floor
     from ..errors import SotpyError
     from ..graph import plug
     from ..operators import MatrixHomoToPose, Selec_of_vector
-    from ..solvers.controller import ComServo, Controller, JointServo, MinJerk
+    from ..solvers.controller import ComPidServo, Controller, JointServo, MinJerk
 
     if side not in ("left", "right"):
         raise SotpyError(f"run_talos_torque: side must be 'left' or 'right', got {side!r}")
+    if contacts not in ("floor", "welded"):
+        raise SotpyError(
+            f"run_talos_torque: contacts must be 'floor' or 'welded', got {contacts!r}"
+        )
     robot = load_robot("talos", prefix=prefix)
     device, dyn = robot.device, robot.dynamic
     model = robot.model
+    # flat soles: the SRDF's half-sitting rolls the ankles by -1.7 mrad (the soles' inner
+    # and outer edges 0.2 mm apart), which a floor shows as a first-tick rocking
+    q_start = np.array(device.state.value)
+    for joint in ("leg_left_6_joint", "leg_right_6_joint"):
+        q_start[model.joints[model.getJointId(joint)].idx_q] = 0.0
+    device.set(q_start)
     ctrl = Controller(f"{prefix}_ctrl", dyn)
     ctrl.dt.value = dt
     feet = [robot.feet["left"], robot.feet["right"]]
+    kp_c, kd_c = contact_gains
     for foot in feet:
         ctrl.addContact(
-            foot.frame,
-            mu,
-            foot.length - 2 * sole_margin,
-            foot.width - 2 * sole_margin,
-            foot.offset[0],
-            foot.offset[1],
-            6,
-            0.0,
-        )
+            foot.frame, mu, foot.length, foot.width, foot.offset[0], foot.offset[1], 6,
+            fmin, sole_margin, 8, kp_c, kd_c,
+        )  # fmt: skip
     ctrl.addComTask("comTask", 10.0, 0)
     ctrl.addCartesianTask("hand", robot.opPoints["right-wrist"], hand_weight, 0)
     ctrl.addJointTask("posture", 1e-2, 0)
     ctrl.addTorqueLimits("torque")
     ctrl.addJointPositionLimits("qlim", 0.05)
     ctrl.setResolutionStrategy(strategy)
+    ctrl.setRampDuration("hand", hand_ramp)
 
-    # CoM: min-jerk of a placement whose translation is the CoM
+    # CoM: a min-jerk placement whose translation is the CoM reference
     com0 = np.array(ctrl.com.value)
     data = model.createData()
     q0 = np.array(device.state.value)
     pin.framesForwardKinematics(model, data, q0)
     fids = [model.getFrameId(f.frame) for f in feet]
     sole0 = [pin.SE3(data.oMf[i]) for i in fids]
-    target_foot = feet[0] if side == "left" else feet[1]
-    M_foot = sole0[0] if side == "left" else sole0[1]
-    centre = M_foot.act(np.array([*target_foot.offset[:2], 0.0]))
+    stance = 0 if side == "left" else 1
+    centre = sole0[stance].act(np.array([*feet[stance].offset[:2], 0.0]))
     com_goal = np.array([centre[0], centre[1], com0[2]])
     com_traj = MinJerk(f"{prefix}_comTraj")
     com_traj.dt.value = dt
@@ -205,8 +246,11 @@ def run_talos_torque(
     com_acc = Selec_of_vector(f"{prefix}_comAcc")
     com_acc.selec(0, 3)
     plug(com_traj.acceleration, com_acc.sin)
-    com_servo = ComServo(f"{prefix}_comServo")
+    com_servo = ComPidServo(f"{prefix}_comServo")
     com_servo.Kp.value = np.array([100.0])
+    com_servo.Ki.value = np.array([pid[0]])
+    com_servo.integralLimit.value = np.array([pid[1]])
+    com_servo.dt.value = dt
     plug(ctrl.com, com_servo.position)
     plug(ctrl.comVelocity, com_servo.velocity)
     plug(com_pos.sout, com_servo.reference)
@@ -214,20 +258,13 @@ def run_talos_torque(
     plug(com_acc.sout, com_servo.referenceAcceleration)
     plug(com_servo.desiredAcceleration, ctrl.comTask)
 
-    # right hand
-    hand_traj = _servoed_pose(
-        f"{prefix}_handTraj",
-        f"{prefix}_handServo",
-        dt,
-        100.0,
-        ctrl,
-        "hand",
-        "handPose",
-        "handVelocity",
-    )
-    hand0 = pin.SE3(ctrl.handPose.value)
-    hand_goal = pin.SE3(hand0.rotation, hand0.translation + np.asarray(hand_offset, float))
-    hand_traj.setTrajectory(hand0, hand_goal, duration, 0)
+    # right hand: its trajectory is set when its task is activated
+    hand_traj, hand_servo = _servoed_pose(
+        f"{prefix}_handTraj", f"{prefix}_handServo", dt, 100.0, ctrl, "hand", "handPose",
+        "handVelocity", *pid,
+    )  # fmt: skip
+    hand_now = pin.SE3(ctrl.handPose.value)
+    hand_traj.setTrajectory(hand_now, hand_now, duration, 0)
 
     # posture
     jservo = JointServo(f"{prefix}_jservo")
@@ -239,26 +276,66 @@ def run_talos_torque(
     jservo.Kp.value = np.array([25.0])
     plug(jservo.desiredAcceleration, ctrl.posture)
 
-    ctrl.activateTasksAndConstraints()
+    for name in ("comTask", "posture", "torque", "qlim"):
+        ctrl.activate(name)
     device.setControlType("torque")
-    device.setContacts([f.frame for f in feet])
+    if contacts == "floor":
+        device.setFloor(feet, floor if floor is not None else Floor())
+    else:
+        device.setContacts([f.frame for f in feet])
     plug(ctrl.torque, device.control)
 
-    n = round((duration + settle) / dt)
+    # the schedule, in ticks
+    k_shift = round(duration / dt)
+    k_ramp = k_shift + round(hand_ramp / dt)
+    k_reach = k_ramp + round(duration / dt)
+    k_back = k_reach + round(duration / dt)
+    n = k_back + round(settle / dt)
+    phases = {
+        "shift": (0.0, k_shift * dt),
+        "ramp": (k_shift * dt, k_ramp * dt),
+        "reach": (k_ramp * dt, k_reach * dt),
+        "back": (k_reach * dt, k_back * dt),
+        "settle": (k_back * dt, n * dt),
+    }
+    tick0 = max(device.state.time, 0)
+    hand_goal = None
     limits = model.effortLimit[6:]
-    k_pyr = [(f.length, f.width, f.offset) for f in feet]
     times = np.empty(n)
     coms = np.empty((n, 3))
+    com_ref = np.empty((n, 3))
+    hands = np.full((n, 3), np.nan)
+    hand_ref = np.full((n, 3), np.nan)
     wrenches = np.empty((n, 2, 6))
     ctrl_wrenches = np.empty((n, 2, 6))
     torques = np.empty((n, len(limits)))
+    point_min = np.full(n, np.inf)
+    placements = np.empty((n, 2, 4))  # per sole: x, y, z displacement, rotation angle
     found = True
-    drift = rot = 0.0
     for k in range(n):
+        t = tick0 + k
+        if k == k_shift:  # the hand task ramps in where the hand is
+            hand_now = pin.SE3(ctrl.handPose.value)
+            hand_traj.setTrajectory(hand_now, hand_now, hand_ramp, t)
+            hand_servo.resetIntegral()
+            ctrl.activate("hand")
+        if k == k_ramp:
+            hand_goal = pin.SE3(
+                hand_now.rotation, hand_now.translation + np.asarray(hand_offset, float)
+            )
+            hand_traj.setTrajectory(hand_now, hand_goal, duration, t)
+        if k == k_reach:
+            com_traj.setTrajectory(
+                pin.SE3(np.eye(3), com_goal), pin.SE3(np.eye(3), com0), duration, t
+            )
         # the controller's outputs at the tick the device is about to apply (pool.time)
         found = found and bool(ctrl.solutionFound.value)
         torques[k] = ctrl.torque.value
         ctrl_wrenches[k] = ctrl.wrenches.value.reshape(2, 6)
+        com_ref[k] = com_traj.pose.value.translation
+        if k >= k_shift:
+            hand_ref[k] = hand_traj.pose.value.translation
+            hands[k] = ctrl.handPose.value.translation
         device.increment(dt)
         q = device.state.value
         pin.framesForwardKinematics(model, data, q)
@@ -266,53 +343,127 @@ def run_talos_torque(
         for i, (foot, fid) in enumerate(zip(feet, fids, strict=True)):
             M = data.oMf[fid]
             wrenches[k, i] = _local_wrench(M.rotation, forces[foot.frame])
-            drift = max(drift, float(np.linalg.norm(M.translation - sole0[i].translation)))
-            rot = max(rot, float(np.linalg.norm(pin.log3(sole0[i].rotation.T @ M.rotation))))
+            placements[k, i, :3] = M.translation - sole0[i].translation
+            placements[k, i, 3] = np.linalg.norm(pin.log3(sole0[i].rotation.T @ M.rotation))
+        normals = [p.force[2] for p in device.contactPoints()]
+        if contacts == "floor":
+            point_min[k] = min(normals) if len(normals) == 8 else 0.0  # a corner off
         coms[k] = pin.centerOfMass(model, data, q)
         times[k] = (k + 1) * dt
-    # independent checks on the simulated wrenches (sole frames)
-    fz = wrenches[:, :, 2]
-    fxy = np.hypot(wrenches[:, :, 0], wrenches[:, :, 1])
-    friction = float(np.max(fxy / (mu * fz)))
-    cop_margin = np.inf
-    torsion = 0.0
-    for i, (length, width, off) in enumerate(k_pyr):
-        cx = -wrenches[:, i, 4] / fz[:, i] - off[0]
-        cy = wrenches[:, i, 3] / fz[:, i] - off[1]
-        m = np.minimum(length / 2 - np.abs(cx), width / 2 - np.abs(cy))
-        cop_margin = min(cop_margin, float(np.min(m)))
-        torsion = max(
-            torsion,
-            float(np.max(np.abs(wrenches[:, i, 5]) / (mu * min(length, width) / 2 * fz[:, i]))),
-        )
-    hand = pin.SE3(ctrl.handPose.value)
-    out: dict[str, Any] = {
-        "feet_drift": drift,
-        "feet_rotation": rot,
-        "min_fz": float(np.min(fz)),
-        "friction_ratio": friction,
-        "cop_margin": cop_margin,
-        "torsion_ratio": torsion,
-        "com_error": float(np.linalg.norm(coms[-1, :2] - com_goal[:2])),
-        "hand_error": float(np.linalg.norm(hand.translation - hand_goal.translation)),
-        "max_torque_ratio": float(np.max(np.abs(torques) / limits)),
-        "solution_found": found,
-        "max_wrench_mismatch": float(np.max(np.abs(ctrl_wrenches - wrenches))),
-        "times": times,
-        "com": coms,
-        "com_goal": com_goal,
-        "wrenches": wrenches,
-        "torques": torques,
-        "side": side,
-        "soles": [{"length": f.length, "width": f.width, "offset": f.offset[:2]} for f in feet],
-        "plot": None,
-    }
+
+    out = _talos_checks(
+        times, coms, com_ref, hands, hand_ref, wrenches, ctrl_wrenches, torques, placements,
+        point_min, feet, mu, dt, limits, (k_shift, k_ramp),
+    )  # fmt: skip
+    out.update(
+        {
+            "solution_found": found,
+            "com_error": float(np.linalg.norm(coms[-1, :2] - com0[:2])),
+            "hand_error": float(np.linalg.norm(hands[-1] - hand_goal.translation)),
+            "com_goal": com_goal,
+            "side": side,
+            "contacts": contacts,
+            "strategy": strategy,
+            "joint_names": list(model.names)[-len(limits) :],
+            "phases": phases,
+            "soles": [{"length": f.length, "width": f.width, "offset": f.offset[:2]} for f in feet],
+            "plot": None,
+        }
+    )
+    _talos_verdict(out, contacts)
     if plot is not None:
         from ..plotting import plot_talos_torque
 
         plot_talos_torque(out, plot)
         out["plot"] = str(plot)
     return out
+
+
+#: The tolerances of ``run_talos_torque``'s verdict (m, rad, N).
+TALOS_TOLERANCES = {"slide": 1e-3, "tilt": 1e-2, "tracking": 1e-3, "cop_margin": 5e-3}
+
+
+def _talos_checks(
+    times, coms, com_ref, hands, hand_ref, wrenches, ctrl_wrenches, torques, placements,
+    point_min, feet, mu, dt, limits, ramp_window,
+) -> dict[str, Any]:  # fmt: skip
+    """The checks of ``run_talos_torque`` from its recorded arrays (see its doc)."""
+    fz = wrenches[:, :, 2]
+    fxy = np.hypot(wrenches[:, :, 0], wrenches[:, :, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        friction = float(np.max(fxy / (mu * fz)))
+    cop_margin = np.inf
+    for i, foot in enumerate(feet):
+        off = foot.offset
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cx = -wrenches[:, i, 4] / fz[:, i] - off[0]
+            cy = wrenches[:, i, 3] / fz[:, i] - off[1]
+        m = np.minimum(foot.length / 2 - np.abs(cx), foot.width / 2 - np.abs(cy))
+        cop_margin = min(cop_margin, float(np.min(np.where(fz[:, i] > 0, m, -np.inf))))
+    from ..solvers.wbc.solver import RATE_TIME
+
+    k0, k1 = ramp_window
+    step = np.asarray(limits, dtype=float) / RATE_TIME * dt  # the documented bound (N m/tick)
+    dtau = np.abs(np.diff(torques[k0 - 1 : k1 + 1], axis=0))
+    tracked = ~np.isnan(hand_ref[:, 0])
+    ramp_end = k0 + int(np.argmax(tracked[k0:])) if tracked.any() else len(times)
+    hand_err = np.linalg.norm(hands - hand_ref, axis=1)
+    return {
+        "times": times,
+        "com": coms,
+        "com_ref": com_ref,
+        "hand": hands,
+        "hand_ref": hand_ref,
+        "wrenches": wrenches,
+        "torques": torques,
+        "torque_limits": np.asarray(limits, dtype=float),
+        "feet_slide": float(np.max(np.linalg.norm(placements[:, :, :2], axis=2))),
+        "feet_lift": float(np.max(np.abs(placements[:, :, 2]))),
+        "feet_tilt": float(np.max(placements[:, :, 3])),
+        "min_fz": float(np.min(fz)),
+        "min_point_force": float(np.min(point_min)),
+        "friction_ratio": friction,
+        "cop_margin": cop_margin,
+        "max_rate_ratio": float(np.max(dtau / step)),
+        "rate_bound": step,
+        "com_tracking": float(np.max(np.linalg.norm(coms[:, :2] - com_ref[:, :2], axis=1))),
+        "hand_tracking": float(np.nanmax(hand_err[ramp_end:])),
+        "max_torque_ratio": float(np.max(np.abs(torques) / limits)),
+        "max_wrench_mismatch": float(np.max(np.abs(ctrl_wrenches - wrenches))),
+    }
+
+
+def _talos_verdict(out: dict[str, Any], contacts: str) -> None:
+    """``out["ok"]`` and ``out["summary"]`` (the demo's one-line report)."""
+    tol = TALOS_TOLERANCES
+    ok = (
+        out["solution_found"]
+        and out["feet_slide"] <= tol["slide"]
+        and out["feet_tilt"] <= tol["tilt"]
+        and out["min_fz"] > 0
+        and (contacts != "floor" or out["min_point_force"] > 0)
+        and out["cop_margin"] >= tol["cop_margin"]
+        and out["friction_ratio"] <= 1.0
+        and out["max_rate_ratio"] <= 1.0 + 1e-6
+        and out["com_tracking"] <= tol["tracking"]
+        and out["hand_tracking"] <= tol["tracking"]
+        and out["com_error"] <= tol["tracking"]
+        and out["hand_error"] <= tol["tracking"]
+        and out["max_torque_ratio"] <= 1.0
+    )
+    out["ok"] = bool(ok)
+    out["summary"] = (
+        f"talos-torque {'OK' if ok else 'FAILED'} ({contacts}):"
+        f" feet slide {1e3 * out['feet_slide']:.3f} mm, tilt {1e3 * out['feet_tilt']:.2f} mrad,"
+        f" min f_z {out['min_fz']:.0f} N, min corner force {out['min_point_force']:.0f} N,"
+        f" min CoP margin {1e3 * out['cop_margin']:.1f} mm,"
+        f" max |f_t|/(mu f_z) {out['friction_ratio']:.2f},"
+        f" max torque step {out['max_rate_ratio']:.2f} of its bound in the ramp,"
+        f" CoM / hand tracking {1e3 * out['com_tracking']:.2f} / {1e3 * out['hand_tracking']:.2f}"
+        f" mm, final {1e3 * out['com_error']:.2f} / {1e3 * out['hand_error']:.2f} mm,"
+        f" max |tau|/limit {out['max_torque_ratio']:.2f},"
+        f" solution every tick: {out['solution_found']}"
+    )
 
 
 def run_callbacks(
@@ -394,16 +545,23 @@ def run_callbacks(
     return lines
 
 
-def _servoed_pose(traj_name, servo_name, dt, kp, ctrl, task, pose, velocity):
-    """A minimum-jerk trajectory followed by a pose servo (gains ``kp`` on every axis)
-    that drives the controller's Cartesian task ``task`` from its ``pose`` and
-    ``velocity`` outputs; returns the trajectory (the caller sets it)."""
+def _servoed_pose(traj_name, servo_name, dt, kp, ctrl, task, pose, velocity, ki=0.0, limit=0.0):
+    """A minimum-jerk trajectory followed by a pose servo (gains ``kp`` on every axis;
+    with ``ki > 0`` a PID, integral gains ``ki`` clamped to ``limit``) that drives the
+    controller's Cartesian task ``task`` from its ``pose`` and ``velocity`` outputs;
+    returns the trajectory (the caller sets it) and the servo."""
     from ..graph import plug
-    from ..solvers.controller import MinJerk, PoseServo
+    from ..solvers.controller import MinJerk, PosePidServo, PoseServo
 
     traj = MinJerk(traj_name)
     traj.dt.value = dt
-    servo = PoseServo(servo_name)
+    if ki > 0:
+        servo = PosePidServo(servo_name)
+        servo.Ki.value = np.full(6, ki)
+        servo.integralLimit.value = np.full(6, limit)
+        servo.dt.value = dt
+    else:
+        servo = PoseServo(servo_name)
     servo.Kp.value = np.full(6, kp)
     plug(getattr(ctrl, pose), servo.position)
     plug(getattr(ctrl, velocity), servo.velocity)
@@ -411,4 +569,4 @@ def _servoed_pose(traj_name, servo_name, dt, kp, ctrl, task, pose, velocity):
     plug(traj.velocity, servo.referenceVelocity)
     plug(traj.acceleration, servo.referenceAcceleration)
     plug(servo.desiredAcceleration, getattr(ctrl, task))
-    return traj
+    return traj, servo

@@ -59,7 +59,18 @@ Control types (``setControlType``)
       drift. The proximal solver runs with accuracy 1e-12, ``mu = 1e-8`` and at most
       10 iterations, so a redundant set of contacts still has a (least-norm) solution.
 
+    * on a floor set by ``setFloor(patches, floor)`` (the default of the torque demos
+      and tests): each sole (:class:`~sotpy.dynamics.contact.FootPatch`, a grid of
+      points) touches a horizontal floor through unilateral contacts with Coulomb
+      friction, so that a foot can lift, tilt and slide; the step is one step of MuJoCo
+      on a copy of the model (:mod:`sotpy.dynamics.contact`: the floor's friction and
+      stiffness, how the model is built, why MuJoCo), then the bounds below.
+
     then semi-implicit Euler: ``v+ = clamp_v(v + a dt)``, ``q+ = q (+) v+ dt``.
+
+    ``setExternalWrench(frame, w)`` adds a wrench ``w`` (force then torque, N and N m,
+    world axes, at the frame's origin: a push) to every torque-mode step, as the
+    generalised force ``J^T w`` (``J`` the frame's LOCAL_WORLD_ALIGNED Jacobian).
 
 ``q (+) w`` is ``pinocchio.integrate``: for the free-flyer the base placement becomes
 ``M exp6(w)`` (the exact SE(3) exponential of the twist ``w`` expressed in the base
@@ -68,9 +79,11 @@ frame); every unit quaternion (or unit complex number) of ``q+`` is then renorma
 
 What the simulation assumes (torque mode)
 -----------------------------------------
-* contacts are rigid and bilateral: a contact frame is welded to its reference
-  placement, it pulls as well as it pushes and never breaks or slides (no unilateral
-  condition, no friction cone, no limit on the contact wrench);
+* on a floor (``setFloor``): MuJoCo's soft unilateral contacts (see
+  :mod:`sotpy.dynamics.contact`); the rest of this list is about welded contacts;
+* welded contacts (``setContacts``) are rigid and bilateral: a contact frame is welded
+  to its reference placement, it pulls as well as it pushes and never breaks or slides
+  (no unilateral condition, no friction cone, no limit on the contact wrench);
 * no collision between bodies or with the ground besides those contacts;
 * torques are held constant over ``dt``; semi-implicit Euler, first order in ``dt``
   (use ``dt`` of about 1 ms);
@@ -123,6 +136,7 @@ import pinocchio as pin
 from .._jit import kernel
 from ..errors import (
     CommandError,
+    ContactError,
     EntityError,
     SignalTypeError,
     SimulationError,
@@ -131,6 +145,7 @@ from ..errors import (
 )
 from ..graph import VECTOR, Entity, Input, Output, PeriodicCall, Plan, command
 from ..graph.pool import pool
+from .contact import Floor, FloorSimulator, FootPatch, PatchPoint
 
 __all__ = [
     "BOUND_KINDS",
@@ -319,6 +334,8 @@ class Device(Entity):
         self._contactKd = DEFAULT_CONTACT_KD
         self._contactForces: dict[str, np.ndarray] = {}
         self._prox = pin.ProximalSettings(1e-12, 1e-8, 10)
+        self._floor: FloorSimulator | None = None
+        self._externalWrenches: dict[str, np.ndarray] = {}
 
         self.before = PeriodicCall(f"{self.className}({name}).before")
         self.after = PeriodicCall(f"{self.className}({name}).after")
@@ -498,11 +515,99 @@ class Device(Entity):
         self._contactFrames = frames
         self._contactModels, self._contactDatas = models, datas
         self._contactForces = {}
+        if frames:
+            self._floor = None  # welded feet or a floor, not both
 
     @command
     def getContacts(self) -> list[str]:
         """The contact frames (``setContacts``)."""
         return list(self._contactFrames)
+
+    @command
+    def setFloor(self, patches: Sequence[Any], floor: Floor | None = None) -> None:
+        """Stand the robot on a floor (torque mode): unilateral contacts with friction
+
+        ``patches``: the soles, each a :class:`~sotpy.dynamics.contact.FootPatch` or a
+        robot's ``Foot`` (``robot.feet.values()``: its corners); ``floor``: a
+        :class:`~sotpy.dynamics.contact.Floor` (friction, stiffness, height; default
+        ``Floor()``). Replaces welded contacts (``setContacts``); ``setFloor([])``
+        removes the floor. See :mod:`sotpy.dynamics.contact`.
+        """
+        if isinstance(patches, (str, FootPatch)) or not isinstance(patches, (list, tuple)):
+            raise CommandError(
+                f"{self._who('setFloor')}: expected a list of FootPatch (or robot feet), "
+                f"got {patches!r}"
+            )
+        if floor is not None and not isinstance(floor, Floor):
+            raise CommandError(f"{self._who('setFloor')}: expected a Floor, got {floor!r}")
+        ps = [p if isinstance(p, FootPatch) else FootPatch.from_foot(p) for p in patches]
+        sim = FloorSimulator(self._model, ps, floor or Floor()) if ps else None
+        self._floor = sim
+        if sim is not None:
+            self._contactFrames = []
+            self._contactModels = self._contactDatas = None
+        self._contactForces = {}
+
+    @command
+    def getFloor(self) -> Floor | None:
+        """The floor's settings (``setFloor``), or None."""
+        return None if self._floor is None else self._floor.floor
+
+    @command
+    def getFloorPatches(self) -> list[FootPatch]:
+        """The soles on the floor (``setFloor``)."""
+        return [] if self._floor is None else list(self._floor.patches)
+
+    @command
+    def contactPoints(self) -> list[PatchPoint]:
+        """The floor's contact points of the last torque-mode step: patch frame, point
+        index, position (world, m), force on the robot (world axes, N), penetration
+        (m). A point of a patch that does not touch the floor is not listed."""
+        return [] if self._floor is None else list(self._floor.points)
+
+    @command
+    def setExternalWrench(self, frame: str, wrench: np.ndarray) -> None:
+        """Apply ``wrench`` (6: force in N then torque in N m, world axes, at the
+        frame's origin) to ``frame`` in every torque-mode step, until cleared
+        (``clearExternalWrenches``, or a zero wrench)."""
+        if not isinstance(frame, str) or not self._model.existFrame(frame):
+            raise ContactError(
+                f"{self._who('setExternalWrench')}: {frame!r} is not a frame of the model; "
+                "nothing is applied"
+            )
+        w = np.asarray(wrench, dtype=np.float64)
+        if w.shape != (6,) or not np.isfinite(w).all():
+            raise ContactError(
+                f"{self._who('setExternalWrench')}: the wrench must be 6 finite values "
+                f"(force N, torque N m), got {wrench!r}; nothing is applied"
+            )
+        if np.any(w):
+            self._externalWrenches[frame] = w.copy()
+        else:
+            self._externalWrenches.pop(frame, None)
+
+    @command
+    def getExternalWrenches(self) -> dict[str, np.ndarray]:
+        """The wrenches applied by ``setExternalWrench``, per frame."""
+        return {k: w.copy() for k, w in self._externalWrenches.items()}
+
+    @command
+    def clearExternalWrenches(self) -> None:
+        """Remove every external wrench."""
+        self._externalWrenches.clear()
+
+    def _externalForces(self, q: np.ndarray) -> np.ndarray | None:
+        """``sum_k J_k^T w_k`` (nv) of the external wrenches at ``q``, or None."""
+        if not self._externalWrenches:
+            return None
+        model, data = self._model, self._data
+        out = np.zeros(self._nv)
+        for frame, w in self._externalWrenches.items():
+            J = pin.computeFrameJacobian(
+                model, data, q, model.getFrameId(frame), pin.LOCAL_WORLD_ALIGNED
+            )
+            out += J.T @ w
+        return out
 
     @command
     def setContactGains(self, Kp: float, Kd: float) -> None:
@@ -527,8 +632,10 @@ class Device(Entity):
 
         Each a 6-vector (force in N, then torque in N m) exerted by the environment on
         the robot at the frame's origin, in world-aligned axes (Pinocchio's
-        LOCAL_WORLD_ALIGNED): the vertical force is entry 2. Empty until a torque-mode
-        step with contacts ran since the contacts were set.
+        LOCAL_WORLD_ALIGNED): the vertical force is entry 2. The welded contacts
+        (``setContacts``) or the floor's patches (``setFloor``: the sum of the patch's
+        point forces, zero when it does not touch). Empty until a torque-mode step with
+        contacts ran since the contacts were set.
         """
         return {k: f.copy() for k, f in self._contactForces.items()}
 
@@ -723,6 +830,11 @@ class Device(Entity):
                 tau_full[self._tauOffset :] = tau
             else:
                 tau_full = tau
+            ext = self._externalForces(q)
+            if ext is not None:
+                tau_full = tau_full + ext
+            if self._floor is not None:
+                return self._floorStep(q, v, tau_full, dt, events)
             if self._contactModels is not None:
                 a = pin.constraintDynamics(
                     model,
@@ -744,6 +856,27 @@ class Device(Entity):
         q_next = pin.normalize(model, pin.integrate(model, q, v_next * dt))
         q_next = self._clampPosition(q_next, v_next, events)
         return q_next, v_next, forces
+
+    def _floorStep(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        tau_full: np.ndarray,
+        dt: float,
+        events: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]],
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """A torque-mode step on the floor (MuJoCo), then the velocity and position
+        bounds; a clamped velocity is integrated again by ``pinocchio.integrate``."""
+        sim = self._floor
+        assert sim is not None
+        q_sim, v_sim = sim.step(q, v, tau_full, dt)
+        v_next = self._clamp(v_sim, self._velLower, self._velUpper, "velocity", events)
+        if v_next is v_sim:
+            q_next = pin.normalize(self._model, q_sim)
+        else:
+            q_next = pin.normalize(self._model, pin.integrate(self._model, q, v_next * dt))
+        q_next = self._clampPosition(q_next, v_next, events)
+        return q_next, v_next, {k: w.copy() for k, w in sim.wrenches.items()}
 
     def _checkedControl(self, u: Any, t: int) -> np.ndarray:
         n = self._ntau if self._controlType == "torque" else self._nv

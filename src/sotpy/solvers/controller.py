@@ -70,11 +70,23 @@ from .wbc import (
     check_gains,
     joint_pd,
     min_jerk,
+    pid_step,
+    pose_error,
     pose_pd,
     wrench_pi,
 )
 
-__all__ = ["ComServo", "Controller", "JointServo", "MinJerk", "PoseServo", "WrenchServo"]
+__all__ = [
+    "ComPidServo",
+    "ComServo",
+    "Controller",
+    "JointPidServo",
+    "JointServo",
+    "MinJerk",
+    "PosePidServo",
+    "PoseServo",
+    "WrenchServo",
+]
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
 
@@ -403,11 +415,43 @@ class Controller(Entity):
         offsetY: float = 0.0,
         dim: int = 6,
         fmin: float = 0.0,
+        margin: float = 0.0,
+        facets: int = 8,
+        Kp: float = 0.0,
+        Kd: float | None = None,
     ) -> None:
-        """A unilateral contact at ``frame`` (z the normal; see ``ContactSpec``)."""
-        spec = ContactSpec(frame, dim, mu, length, width, (offsetX, offsetY), fmin)
+        """A unilateral contact at ``frame`` (z the normal): friction ``mu`` (pyramid of
+        ``facets`` faces), the real sole ``length`` x ``width`` (m) centred at
+        ``(offsetX, offsetY)``, the CoP kept ``margin`` (m) inside it, normal force >=
+        ``fmin`` (N), the frame's pose and velocity fed back with ``Kp`` (1/s^2) and
+        ``Kd`` (1/s, default ``2 sqrt(Kp)``); see ``ContactSpec``."""
+        spec = ContactSpec(
+            frame, dim, mu, length, width, (offsetX, offsetY), fmin, margin, facets, Kp, Kd
+        )
         self._wrap("addContact", self.core.setContacts, [*self.core.contacts, spec])
         self.solution.setReady()
+
+    @command
+    def setContactCostWeight(self, weight: float) -> None:
+        """Weight (>= 0) of the default contact wrench distribution cost (0: none): each
+        CoP pulled to its sole's centre, tangential forces and torsion to zero (see
+        ``sotpy.solvers.wbc.ContactWrenchCost``)."""
+        self._wrap("setContactCostWeight", self.core.setContactCostWeight, weight)
+        self.solution.setReady()
+
+    @command
+    def setTorqueRateLimit(self, rate: Any) -> None:
+        """The bound on the torque change during a transition (an activation, a
+        deactivation, a strategy switch): ``|tau - tau_prev| <= rate dt`` per tick
+        (N m/s, one value or one per actuated joint; default each joint's effort limit
+        per 0.25 s)."""
+        self._wrap("setTorqueRateLimit", self.core.setTorqueRateLimit, rate)
+        self.solution.setReady()
+
+    @command
+    def getTorqueRateLimit(self) -> np.ndarray:
+        """The torque rate bound of transitions (N m/s per actuated joint)."""
+        return self.core.torque_rate.copy()
 
     @command
     def addBilateralContact(self, name: str, frameA: str, frameB: str) -> None:
@@ -543,8 +587,6 @@ class PoseServo(Entity):
     @Output(VECTOR, deps=("position", "reference"))
     def error(self, M, Md) -> np.ndarray:
         """Pose error (p - p_d, log3(R R_d^T)) (m, rad)."""
-        from .wbc import pose_error
-
         return pose_error(M, Md)
 
 
@@ -594,6 +636,128 @@ class JointServo(_VectorServo):
 
 class ComServo(_VectorServo):
     """PD on the CoM (plug ``Controller.com``/``comVelocity``)."""
+
+
+_PID_INPUTS = (*_SERVO_INPUTS, "Ki", "integralLimit", "dt")
+
+
+class _Pid:
+    """The integral state of the PID servos (see :func:`sotpy.solvers.wbc.pid_step`):
+    ``I`` integrates the error once per tick (``dt`` times the ticks since the last
+    computation, one tick at the first), clamped per axis to ``integralLimit``."""
+
+    def _pidInit(self) -> None:
+        self._integral: np.ndarray | None = None
+        self._tLast: int | None = None
+
+    def _gain(self, what: str, x: np.ndarray, n: int, allow_inf: bool = False) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        x = np.full(n, x[0]) if x.shape == (1,) else x
+        ok = np.all(~np.isnan(x)) and (allow_inf or np.all(np.isfinite(x)))
+        if x.shape != (n,) or not ok or np.any(x < 0):
+            raise SotpyError(
+                f"{self.className}({self.name})::{what}: expected 1 or {n} values >= 0"
+                f"{'' if allow_inf else ', finite'}, got {x}"
+            )
+        return x
+
+    def _pid(self, t, e, de, ad, kp, kd, Ki, limit, dt) -> np.ndarray:
+        n = len(e)
+        ki = self._gain("Ki", Ki, n)
+        lim = self._gain("integralLimit", limit, n, allow_inf=True)
+        if not (math.isfinite(dt) and dt > 0):
+            raise SotpyError(f"{self.className}({self.name})::dt: expected > 0 s, got {dt}")
+        if self._integral is None or self._integral.shape != (n,):
+            self._integral = np.zeros(n)
+        steps = 1 if self._tLast is None else max(t - self._tLast, 0)
+        self._tLast = t
+        out, self._integral = pid_step(e, de, ad, self._integral, steps * dt, kp, kd, ki, lim)
+        return out
+
+    @command
+    def resetIntegral(self) -> None:
+        """Set the integral to zero (at the next computation): call it when the task
+        the servo drives is activated, or its reference jumps."""
+        self._integral = None
+        self._tLast = None
+        self.signal("desiredAcceleration").setReady()
+
+    @command
+    def getIntegral(self) -> np.ndarray:
+        """The integral ``I`` of the error after the last computation (m s, rad s)."""
+        return np.zeros(0) if self._integral is None else self._integral.copy()
+
+
+class PosePidServo(_Pid, PoseServo):
+    r"""PID on a pose with anti-windup, beside the PD :class:`PoseServo`:
+
+    .. math:: a_{des} = a_{ff} - K_p e - K_d (\nu - \nu_d) - K_i I, \qquad
+              I_k = \mathrm{clamp}(I_{k-1} + e_k \Delta t, -I_{max}, I_{max})
+
+    with ``e = (p - p_d, log3(R R_d^T))`` (m, rad, world axes); ``Ki`` (1/s^3, one or 6
+    values), ``integralLimit`` (``I_max``, m s and rad s, one or 6 values, inf: none).
+    ``resetIntegral()`` when the task is activated."""
+
+    Ki = Input(VECTOR, default=np.zeros(1), doc="integral gains (one or 6, 1/s^3)")
+    integralLimit = Input(
+        VECTOR, default=np.full(1, np.inf), doc="anti-windup clamp of I (one or 6, m s, rad s)"
+    )
+    dt = Input(DOUBLE, default=0.001, doc="tick period (s)")
+
+    def __init__(self, name: str) -> None:
+        self._pidInit()
+
+    @Output(VECTOR, deps=_PID_INPUTS, withTime=True, timeDependent=True)
+    def desiredAcceleration(self, t, M, nu, Md, nud, ad, Kp, Kd, Ki, limit, dt) -> np.ndarray:
+        """Desired acceleration (6, world axes)."""
+        kp, kd = check_gains(f"{self.className}({self.name})", Kp, Kd, 6)
+        for n, x in (("velocity", nu), ("referenceVelocity", nud), ("referenceAcceleration", ad)):
+            if np.shape(x) != (6,):
+                raise SotpyError(
+                    f"{self.className}({self.name})::{n}: expected size 6, got {np.shape(x)}"
+                )
+        e = pose_error(M, Md)
+        return self._pid(t, e, np.asarray(nu) - nud, ad, kp, kd, Ki, limit, dt)
+
+
+class _VectorPid(_Pid, _VectorServo):
+    Ki = Input(VECTOR, default=np.zeros(1), doc="integral gains (one or per axis, 1/s^3)")
+    integralLimit = Input(
+        VECTOR, default=np.full(1, np.inf), doc="anti-windup clamp of I (one or per axis)"
+    )
+    dt = Input(DOUBLE, default=0.001, doc="tick period (s)")
+
+    def __init__(self, name: str) -> None:
+        self._pidInit()
+
+    @Output(VECTOR, deps=_PID_INPUTS, withTime=True, timeDependent=True)
+    def desiredAcceleration(self, t, x, v, xd, vd, ad, Kp, Kd, Ki, limit, dt) -> np.ndarray:
+        """``a_d - Kp (x - x_d) - Kd (v - v_d) - Ki I``."""
+        n = len(x)
+        who = f"{self.className}({self.name})"
+        for name, y in (("velocity", v), ("reference", xd)):
+            if len(y) != n:
+                raise SotpyError(f"{who}::{name}: expected size {n}, got {len(y)}")
+        vd = np.zeros(n) if len(vd) == 0 else vd
+        ad = np.zeros(n) if len(ad) == 0 else ad
+        if len(vd) != n or len(ad) != n:
+            raise SotpyError(f"{who}: referenceVelocity/referenceAcceleration must have size {n}")
+        kp, kd = check_gains(
+            who,
+            Kp[0] if len(Kp) == 1 else Kp,
+            None if len(Kd) == 0 else (Kd[0] if len(Kd) == 1 else Kd),
+            n,
+        )
+        e = np.asarray(x, dtype=float) - xd
+        return self._pid(t, e, np.asarray(v, dtype=float) - vd, ad, kp, kd, Ki, limit, dt)
+
+
+class JointPidServo(_VectorPid):
+    """PID with anti-windup on the actuated joints (see :class:`PosePidServo`)."""
+
+
+class ComPidServo(_VectorPid):
+    """PID with anti-windup on the CoM (see :class:`PosePidServo`; m, m s)."""
 
 
 class MinJerk(Entity):

@@ -8,7 +8,7 @@ one weighted QP or by strict levels (:mod:`.solver`); activation ramps and callb
 entities are in :mod:`sotpy.solvers.controller`. See ``docs/torque-control.md``.
 """
 
-from .activation import CALLBACKS, Activatable
+from .activation import CALLBACKS, RAMP_FLOOR, Activatable, ramp_weight
 from .constraints import (
     Constraint,
     ContactConstraint,
@@ -26,6 +26,7 @@ from .servos import (
     joint_pd,
     min_jerk,
     min_jerk_scalar,
+    pid_step,
     pose_error,
     pose_pd,
     wrench_pi,
@@ -34,6 +35,7 @@ from .solver import STRATEGIES, Solution, WholeBodyController
 from .tasks import (
     CartesianAccelerationTask,
     CoMAccelerationTask,
+    ContactWrenchCost,
     JointAccelerationTask,
     RegularisationTask,
     Task,
@@ -43,6 +45,7 @@ from .tasks import (
 
 __all__ = [
     "CALLBACKS",
+    "RAMP_FLOOR",
     "STRATEGIES",
     "Activatable",
     "BilateralContactSpec",
@@ -52,6 +55,7 @@ __all__ = [
     "ContactConstraint",
     "ContactSpec",
     "ContactState",
+    "ContactWrenchCost",
     "JointAccelerationLimit",
     "JointAccelerationTask",
     "JointPositionLimit",
@@ -71,7 +75,9 @@ __all__ = [
     "joint_pd",
     "min_jerk",
     "min_jerk_scalar",
+    "pid_step",
     "pose_error",
     "pose_pd",
+    "ramp_weight",
     "wrench_pi",
 ]

@@ -1,6 +1,34 @@
-"""Compiled twins of :class:`.qp.WeightedQP`'s reduction and guessed KKT solve (see
-:mod:`sotpy._jit`). Same arithmetic as the NumPy code of :mod:`.qp`, one call each.
-``None`` when compiled kernels are disabled."""
+r"""Compiled twin of :class:`.qp.WeightedQP`'s reduction and guessed active-set solve
+(see :mod:`sotpy._jit`): one call per tick, ``None`` when compiled kernels are disabled.
+
+It computes what the NumPy code of :mod:`.qp` computes, exploiting what the rows of a
+whole-body problem look like rather than treating them as dense:
+
+* the reduced Hessian ``H = eps I + sum_i w_i e_i e_i^T`` is accumulated row by row
+  over each row's nonzero entries (``e_i`` the row over ``y``; a posture row has one, a
+  Cartesian row the joints of its chain), ``sum_i nnz_i^2`` operations instead of
+  ``m ny^2``; its Cholesky factor and the triangular solves skip the entries before
+  each row's first nonzero (the envelope: the forces' block does not couple to the
+  accelerations' unless a row touches both, a friction row starts at the forces);
+* the guessed KKT system is solved in the range space of the Hessian instead of by an
+  LU of the whole KKT matrix. For the equalities and guessed rows ``G y = b``, the
+  Hessian is first augmented, ``H_a = H + G^T R G`` and ``g_a = g - G^T R b`` (``R``
+  diagonal, ``rho_p = max diag H / |G_p|^2``): the same optimum on ``G y = b`` and the
+  same multipliers, but the directions that only the regularisation penalises and the
+  equalities pin (the floating base's) are no longer ``eps``-flat, without which the
+  range-space solve loses eight digits. With ``H_a = L L^T`` (Cholesky), ``W = L^{-1}
+  G^T`` and ``u = L^{-1} g_a``, the multipliers solve ``(W^T W) lambda = -(b + W^T u)``
+  (a Cholesky of ``k x k``, ``k`` the number of those rows) and ``y = -L^{-T} (u + W
+  lambda)``. ``y`` is then stationary by construction; the guess is accepted only if
+  every row holds (``PRIMAL_TOL``: the equalities and guessed rows as well, which
+  catches nearly dependent rows) and every guessed multiplier has the sign of its bound
+  (``DUAL_TOL``): the optimality conditions of the convex QP.
+
+The data come packed in one array and the results go to one workspace array (their
+layouts: :func:`data_layout`, :func:`work_layout`): at these sizes (50 variables on
+Talos) converting a dozen arrays to and from Python would cost as much as the
+arithmetic. The small factorisations are loops for the same reason.
+"""
 
 from __future__ import annotations
 
@@ -10,160 +38,399 @@ import numpy as np
 
 from ..._jit import kernel, report_compile
 
+__all__ = ["data_layout", "solve", "warm_up", "work_layout"]
 
-def _reduce(A, c, E, f, w, C, lo, hi, reg, nv, na):  # pragma: no cover - compiled
-    """``(status, (H, g, Au, cu, Cy, lo_y, hi_y, Tt, tt))`` as
-    :meth:`.qp.WeightedQP.reduce`; the actuated rows of ``A`` are its last ``na`` rows.
-    ``status``: 0, or 1 (a NaN bound), 2 (a row with lower > upper + 1e-12)."""
-    n = A.shape[1]
+
+def data_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[int, tuple]]:
+    """Offsets and shapes of the packed input: the dynamics ``A`` (nv x n), ``c``, the
+    task rows ``E`` (m x n), ``f``, ``w``, the constraint rows ``C`` (mc x n), ``lo``,
+    ``hi``; ``"size"``: the total."""
+    out: dict[str, tuple[int, tuple]] = {}
+    o = 0
+    for name, shape in (
+        ("A", (nv, n)), ("c", (nv,)), ("E", (m, n)), ("f", (m,)), ("w", (m,)),
+        ("C", (mc, n)), ("lo", (mc,)), ("hi", (mc,)),
+    ):  # fmt: skip
+        out[name] = (o, shape)
+        o += int(np.prod(shape))
+    out["size"] = (o, ())
+    return out
+
+
+def work_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[int, tuple]]:
+    """Offsets and shapes of the workspace: the reduced QP ``H, g, Au, cu, Cy, lo_y,
+    hi_y, Tt, tt`` (as :meth:`.qp.WeightedQP.reduce`), the solution ``y``, scratch."""
+    ny, nu = n - na, nv - na
+    kmax = nu + mc
+    out: dict[str, tuple[int, tuple]] = {}
+    o = 0
+    for name, shape in (
+        ("H", (ny, ny)), ("g", (ny,)), ("Au", (nu, ny)), ("cu", (nu,)), ("Cy", (mc, ny)),
+        ("lo_y", (mc,)), ("hi_y", (mc,)), ("Tt", (na, ny)), ("tt", (na,)), ("y", (ny,)),
+        ("L", (ny, ny)), ("ey", (ny,)), ("Wt", (kmax, ny)), ("u", (ny,)),
+        ("S", (kmax, kmax)), ("Ls", (kmax, kmax)), ("b", (kmax,)), ("lam", (kmax,)),
+    ):  # fmt: skip
+        out[name] = (o, shape)
+        o += int(np.prod(shape))
+    out["size"] = (o, ())
+    return out
+
+
+def _cholesky(H, L, n, first):  # pragma: no cover - compiled
+    """``L[:n, :n]`` lower with ``L L^T = H[:n, :n]`` (``L`` zero on entry); False if not
+    positive definite. ``first[i]``: the first nonzero column of row ``i`` of ``H``'s
+    lower triangle (``L`` has the same envelope)."""
+    for j in range(n):
+        s = H[j, j]
+        for k in range(first[j], j):
+            s -= L[j, k] * L[j, k]
+        if not s > 1e-300:
+            return False
+        d = np.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            fi = first[i]
+            if fi > j:
+                continue
+            s = H[i, j]
+            k0 = fi if fi > first[j] else first[j]
+            for k in range(k0, j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / d
+    return True
+
+
+def _envelope(H, first, n):  # pragma: no cover - compiled
+    """``first[i]``: the first nonzero column of row ``i`` of the lower triangle."""
+    for i in range(n):
+        j = 0
+        while j < i and H[i, j] == 0.0:
+            j += 1
+        first[i] = j
+
+
+def _forward(L, b, x, n, first):  # pragma: no cover - compiled
+    """``x`` with ``L x = b`` (``L`` lower, n x n, of envelope ``first``); ``x`` may be
+    ``b`` (in place)."""
+    start = n
+    for i in range(n):
+        if b[i] != 0.0:
+            start = i
+            break
+    for i in range(start):
+        x[i] = 0.0
+    for i in range(start, n):
+        s = b[i]
+        j0 = first[i] if first[i] > start else start
+        Li = L[i]
+        for j in range(j0, i):
+            s -= Li[j] * x[j]
+        x[i] = s / Li[i]
+
+
+def _solve(
+    data, ws, act, up, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
+):  # pragma: no cover - compiled
+    """``(status, ok)``: the reduced QP of :meth:`.qp.WeightedQP.reduce` written to the
+    workspace and, if ``guess``, the guessed active set's solution ``y`` (``ok``:
+    accepted). ``status``: 0, or 1 (a NaN bound), 2 (a row with lower > upper +
+    1e-12). The actuated rows of ``A`` are its last ``na`` rows."""
     ny = n - na
     nu = nv - na
-    Ay = np.empty((nv, ny))
-    Ay[:, :nv] = A[:, :nv]
-    Ay[:, nv:] = A[:, nv + na :]
-    Tt = np.ascontiguousarray(Ay[nu:])
-    tt = -c[nu:]
-    Au = np.ascontiguousarray(Ay[:nu])
-    cu = c[:nu].copy()
-    H = reg * (Tt.T @ Tt)
-    for i in range(ny):
-        H[i, i] += reg
-    g = reg * (Tt.T @ tt)
-    m = E.shape[0]
-    if m > 0:
-        Ey = np.empty((m, ny))
-        Ey[:, :nv] = E[:, :nv]
-        Ey[:, nv:] = E[:, nv + na :]
-        fy = f.copy()
-        _add_torque_columns(E, nv, na, Tt, tt, Ey, fy)
-        for i in range(m):
-            s = np.sqrt(w[i])
-            Ey[i] *= s
-            fy[i] *= s
-        H += Ey.T @ Ey
-        g -= Ey.T @ fy
-    mc = C.shape[0]
-    Cy = np.empty((mc, ny))
-    Cy[:, :nv] = C[:, :nv]
-    Cy[:, nv:] = C[:, nv + na :]
-    shift = np.zeros(mc)
-    _add_torque_columns(C, nv, na, Tt, tt, Cy, shift)
-    lo = lo + shift
-    hi = hi + shift
-    status = 0
-    for i in range(mc):
-        if np.isnan(lo[i]) or np.isnan(hi[i]):
-            status = 1
-            break
-        if lo[i] > hi[i] + 1e-12:
-            status = 2
-    return status, (H, g, Au, cu, Cy, lo, hi, Tt, tt)
+    kmax = nu + mc
+    o = 0
+    A = data[o : o + nv * n].reshape((nv, n))
+    o += nv * n
+    c = data[o : o + nv]
+    o += nv
+    E = data[o : o + m * n].reshape((m, n))
+    o += m * n
+    f = data[o : o + m]
+    o += m
+    w = data[o : o + m]
+    o += m
+    C = data[o : o + mc * n].reshape((mc, n))
+    o += mc * n
+    lo = data[o : o + mc]
+    o += mc
+    hi = data[o : o + mc]
+    o = 0
+    H = ws[o : o + ny * ny].reshape((ny, ny))
+    o += ny * ny
+    g = ws[o : o + ny]
+    o += ny
+    Au = ws[o : o + nu * ny].reshape((nu, ny))
+    o += nu * ny
+    cu = ws[o : o + nu]
+    o += nu
+    Cy = ws[o : o + mc * ny].reshape((mc, ny))
+    o += mc * ny
+    loy = ws[o : o + mc]
+    o += mc
+    hiy = ws[o : o + mc]
+    o += mc
+    Tt = ws[o : o + na * ny].reshape((na, ny))
+    o += na * ny
+    tt = ws[o : o + na]
+    o += na
+    y = ws[o : o + ny]
+    o += ny
+    L = ws[o : o + ny * ny].reshape((ny, ny))
+    o += ny * ny
+    ey = ws[o : o + ny]
+    o += ny
+    Wt = ws[o : o + kmax * ny].reshape((kmax, ny))
+    o += kmax * ny
+    u = ws[o : o + ny]
+    o += ny
+    S = ws[o : o + kmax * kmax].reshape((kmax, kmax))
+    o += kmax * kmax
+    Ls = ws[o : o + kmax * kmax].reshape((kmax, kmax))
+    o += kmax * kmax
+    bvec = ws[o : o + kmax]
+    o += kmax
+    lam = ws[o : o + kmax]
 
-
-def _add_torque_columns(E, nv, na, Tt, tt, Ey, fy):  # pragma: no cover - compiled
-    """``Ey += E_tau T_tau`` and ``fy -= E_tau t_tau`` (``E_tau`` the torque columns of
-    ``E``), by rows and skipping zeros when ``E_tau`` is sparse (torque limits: one
-    entry a row; acceleration rows: none), by one product otherwise."""
-    m = E.shape[0]
-    nnz = 0
+    for i in range(nv):
+        for j in range(nv):
+            v = A[i, j]
+            if i < nu:
+                Au[i, j] = v
+            else:
+                Tt[i - nu, j] = v
+        for j in range(nv, ny):
+            v = A[i, j + na]
+            if i < nu:
+                Au[i, j] = v
+            else:
+                Tt[i - nu, j] = v
+    for j in range(na):
+        tt[j] = -c[nu + j]
+    for i in range(nu):
+        cu[i] = c[i]
+    H[:, :] = 0.0
+    g[:] = 0.0
+    idx = np.empty(ny, dtype=np.intp)
+    for i in range(ny):  # eps I: the regularisation of y = (a, f)
+        H[i, i] = reg
+    # the task rows
     for i in range(m):
-        for j in range(na):
-            if E[i, nv + j] != 0.0:
-                nnz += 1
-    if nnz == 0:
-        return
-    if 4 * nnz > m * na:
-        Et = np.ascontiguousarray(E[:, nv : nv + na])
-        Ey += Et @ Tt
-        fy -= Et @ tt
-        return
-    ny = Tt.shape[1]
-    for i in range(m):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        fyi = f[i]
+        for j in range(nv):
+            ey[j] = E[i, j]
+        for j in range(nv, ny):
+            ey[j] = E[i, j + na]
         for j in range(na):
             e = E[i, nv + j]
             if e != 0.0:
-                for c in range(ny):
-                    Ey[i, c] += e * Tt[j, c]
-                fy[i] -= e * tt[j]
-
-
-def _guess(H, g, Au, cu, Cy, lo, hi, act, up, ptol, dtol_rel, lam_max):  # pragma: no cover
-    """``(ok, y)`` as :meth:`.qp.WeightedQP._try_guess` (``ok`` False: not the optimum;
-    raises on a singular KKT matrix)."""
-    ny = H.shape[0]
-    nu = Au.shape[0]
-    mc = Cy.shape[0]
+                for col in range(ny):
+                    ey[col] += e * Tt[j, col]
+                fyi -= e * tt[j]
+        k = 0
+        for col in range(ny):
+            if ey[col] != 0.0:
+                idx[k] = col
+                k += 1
+        for p in range(k):
+            a = idx[p]
+            va = wi * ey[a]
+            g[a] -= va * fyi
+            for q in range(p + 1):
+                b = idx[q]
+                H[a, b] += va * ey[b]
+    for a in range(ny):
+        for b in range(a):
+            H[b, a] = H[a, b]
+    # the constraint rows over y: lo - C_tau tt <= (C_y + C_tau Tt) y <= hi - C_tau tt
+    status = 0
     neq = 0
     for i in range(mc):
+        for j in range(nv):
+            Cy[i, j] = C[i, j]
+        for j in range(nv, ny):
+            Cy[i, j] = C[i, j + na]
+        s = 0.0
+        for j in range(na):
+            e = C[i, nv + j]
+            if e != 0.0:
+                for col in range(ny):
+                    Cy[i, col] += e * Tt[j, col]
+                s += e * tt[j]
+        loy[i] = lo[i] - s
+        hiy[i] = hi[i] - s
+        if np.isnan(loy[i]) or np.isnan(hiy[i]):
+            status = 1
+        elif status == 0 and loy[i] > hiy[i] + 1e-12:
+            status = 2
         if lo[i] == hi[i]:
             neq += 1
-    na_ = act.shape[0]
-    k = ny + nu + neq + na_
-    K = np.zeros((k, k))
-    rhs = np.empty(k)
-    K[:ny, :ny] = H
-    rhs[:ny] = -g
-    K[ny : ny + nu, :ny] = Au
-    rhs[ny : ny + nu] = cu
-    j = ny + nu
+    y[:] = 0.0
+    if status != 0 or not guess:
+        return status, False
+    # the guessed KKT system, in the range space of H + G^T R G (below)
+    nact = act.shape[0]
+    k = nu + neq + nact
+    if k > kmax:
+        return status, False
+    r = 0
+    for i in range(nu):
+        Wt[r] = Au[i]
+        bvec[r] = cu[i]
+        r += 1
     for i in range(mc):
         if lo[i] == hi[i]:
-            K[j, :ny] = Cy[i]
-            rhs[j] = lo[i]
-            j += 1
-    for t in range(na_):
+            Wt[r] = Cy[i]
+            bvec[r] = loy[i]
+            r += 1
+    for t in range(nact):
         i = act[t]
-        K[j, :ny] = Cy[i]
-        rhs[j] = hi[i] if up[t] else lo[i]
-        j += 1
-    K[:ny, ny:] = K[ny:, :ny].T
-    z = np.linalg.solve(K, rhs)
-    y = z[:ny].copy()
-    if not np.all(np.isfinite(z)):
-        return False, y
-    gmax = 1.0 + np.max(np.abs(g))
-    if k > ny and np.max(np.abs(z[ny:])) > lam_max * gmax:
-        return False, y
+        Wt[r] = Cy[i]
+        bvec[r] = hiy[i] if up[t] else loy[i]
+        r += 1
+    # augmented Lagrangian: H + G^T R G and g - G^T R b (R = diag(rho_p), rho_p =
+    # max diag H / |G_p|^2) have the same optimum on G y = b and the same multipliers,
+    # but no direction that the equalities pin and only eps penalises: the range-space
+    # solve is then as accurate as an LU of the KKT matrix
+    hmax = 0.0
+    for i in range(ny):
+        if H[i, i] > hmax:
+            hmax = H[i, i]
+    for i in range(ny):
+        u[i] = g[i]
+        for j in range(i + 1):
+            L[i, j] = H[i, j]
+        for j in range(i + 1, ny):
+            L[i, j] = 0.0
+    for p in range(k):
+        row = Wt[p]
+        kk = 0
+        nrm = 0.0
+        for col in range(ny):
+            if row[col] != 0.0:
+                idx[kk] = col
+                kk += 1
+                nrm += row[col] * row[col]
+        if nrm == 0.0:
+            continue
+        rho = hmax / nrm
+        rb = rho * bvec[p]
+        for q in range(kk):
+            a = idx[q]
+            ra = rho * row[a]
+            u[a] -= row[a] * rb
+            for t2 in range(q + 1):
+                L[a, idx[t2]] += ra * row[idx[t2]]
+    first = np.empty(ny, dtype=np.intp)
+    _envelope(L, first, ny)
+    if not _cholesky(L, L, ny, first):  # in place: each entry is read before written
+        return status, False
+    # rows of W^T = (L^{-1} G^T)^T, u = L^{-1} g_aug: forward substitutions in place
+    for p in range(k):
+        _forward(L, Wt[p], Wt[p], ny, first)
+    _forward(L, u, u, ny, first)
+    # S = W^T W, rhs = -(b + W^T u)
+    for p in range(k):
+        rp = Wt[p]
+        s = 0.0
+        for i in range(ny):
+            s += rp[i] * u[i]
+        lam[p] = -bvec[p] - s
+        for q in range(p + 1):
+            rq = Wt[q]
+            s = 0.0
+            for i in range(ny):
+                s += rp[i] * rq[i]
+            S[p, q] = s
+    firsts = np.zeros(k, dtype=np.intp)
+    Ls[:k, :k] = 0.0
+    if k > 0 and not _cholesky(S, Ls, k, firsts):
+        return status, False
+    for i in range(k):  # Ls Ls^T lam = rhs
+        s = lam[i]
+        for j in range(i):
+            s -= Ls[i, j] * lam[j]
+        lam[i] = s / Ls[i, i]
+    for i in range(k - 1, -1, -1):
+        s = lam[i]
+        for j in range(i + 1, k):
+            s -= Ls[j, i] * lam[j]
+        lam[i] = s / Ls[i, i]
+    lmax = 0.0
+    for i in range(k):
+        a = abs(lam[i])
+        if not a < 1e300:  # NaN or infinite
+            return status, False
+        if a > lmax:
+            lmax = a
+    # y = -L^{-T} (u + W lam)
+    for i in range(ny):
+        ey[i] = u[i]
+    for p in range(k):
+        lp = lam[p]
+        rp = Wt[p]
+        for i in range(ny):
+            ey[i] += rp[i] * lp
+    for i in range(ny - 1, -1, -1):
+        s = ey[i]
+        for j in range(i + 1, ny):
+            s -= L[j, i] * y[j]
+        y[i] = s / L[i, i]
+    for i in range(ny):
+        y[i] = -y[i]
+    gmax = 1.0
+    for i in range(ny):
+        if abs(g[i]) + 1.0 > gmax:
+            gmax = abs(g[i]) + 1.0
+    if lmax > lam_max * gmax:
+        return status, False
     dtol = dtol_rel * gmax
-    base = ny + nu + neq
-    for t in range(na_):
-        lam = z[base + t]
-        if (up[t] and lam < -dtol) or ((not up[t]) and lam > dtol):
-            return False, y
-    v = Cy @ y
+    base = nu + neq
+    for t in range(nact):
+        lt = lam[base + t]
+        if (up[t] and lt < -dtol) or ((not up[t]) and lt > dtol):
+            return status, False
+    for i in range(nu):
+        s = 0.0
+        for j in range(ny):
+            s += Au[i, j] * y[j]
+        if abs(s - cu[i]) > ptol * (1.0 + abs(cu[i])):
+            return status, False
     for i in range(mc):
-        if v[i] > hi[i] + ptol * (1.0 + abs(hi[i])) or v[i] < lo[i] - ptol * (1.0 + abs(lo[i])):
-            return False, y
-    return True, y
+        s = 0.0
+        for j in range(ny):
+            s += Cy[i, j] * y[j]
+        if s > hiy[i] + ptol * (1.0 + abs(hiy[i])) or s < loy[i] - ptol * (1.0 + abs(loy[i])):
+            return status, False
+    return status, True
 
 
-_add_torque_columns = kernel(_add_torque_columns)
-reduce = kernel(_reduce)
-guess = kernel(_guess)
+_cholesky = kernel(_cholesky)
+_envelope = kernel(_envelope)
+_forward = kernel(_forward)
+solve = kernel(_solve)
 _warm: list[bool] = []
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels for the argument types of
+    """Compile (or load from numba's cache) the kernel for the argument types of
     :class:`.qp.WeightedQP`, so that the first control tick does not pay for it; then
     forbid further compilation: a call with other types raises ``TypeError`` (the
     caller falls back to NumPy) instead of stalling a control tick for seconds."""
-    if reduce is None or guess is None or _warm:
+    if solve is None or _warm:
         return
     start = time.perf_counter()
-    nv, na = 2, 1
+    nv, na, m, mc = 2, 1, 1, 1
     n = nv + na
-    A = np.eye(nv, n)
-    c = np.zeros(nv)
-    E = np.eye(1, n)
-    C = np.zeros((1, n))
-    C[0, nv] = 1.0
-    b = np.ones(1)
-    _status, data = reduce(A, c, E, b, b, C, -b, b, 1e-8, nv, na)
-    H, g, Au, cu, Cy, lo, hi, _Tt, _tt = data
-    guess(H, g, Au, cu, Cy, lo, hi, np.zeros(1, dtype=np.intp), np.ones(1, dtype=np.bool_),
-          1e-9, 1e-9, 1e6)  # fmt: skip
-    reduce.disable_compile()
-    guess.disable_compile()
+    lay = data_layout(nv, na, n, m, mc)
+    data = np.zeros(lay["size"][0])
+    ws = np.zeros(work_layout(nv, na, n, m, mc)["size"][0])
+    A = data[: nv * n].reshape(nv, n)
+    A[:, :nv] = np.eye(nv)
+    solve(data, ws, np.zeros(1, dtype=np.intp), np.ones(1, dtype=np.bool_), nv, na, n, m, mc,
+          1e-8, True, 1e-9, 1e-9, 1e6)  # fmt: skip
+    solve.disable_compile()
     _warm.append(True)
-    report_compile("the whole-body QP kernels", time.perf_counter() - start)
+    report_compile("the whole-body QP kernel", time.perf_counter() - start)

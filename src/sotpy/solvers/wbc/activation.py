@@ -1,4 +1,4 @@
-"""Gradual activation and deactivation of tasks and constraints (ORCA's life cycle).
+r"""Gradual activation and deactivation of tasks and constraints (ORCA's life cycle).
 
 States and transitions (``dt`` the control period, ``T`` the ramp duration)::
 
@@ -7,8 +7,21 @@ States and transitions (``dt`` the control period, ``T`` the ramp duration)::
 
 The ramp ``r`` goes linearly from 0 to 1 in ``T`` seconds (``r += dt / T`` each tick;
 ``T = 0``: one tick; a value within 1e-9 of 1 is 1, so ``T = 3 dt`` takes exactly 3
-ticks) and back down (a value within 1e-9 of 0 is 0). A task's weight is multiplied by ``r``; a
-constraint is enforced while it is not ``inactive`` (its bounds are not ramped).
+ticks) and back down (a value within 1e-9 of 0 is 0). A constraint is enforced while it
+is not ``inactive`` (its bounds are not ramped); a contact's wrench bound follows ``r``
+(see ``ContactState``).
+
+A task's weight is multiplied by ``ramp_weight(r)``, not by ``r``: with
+``s = 3 r^2 - 2 r^3`` (smoothstep),
+
+.. math:: \rho(r) = s \; \epsilon^{1 - s}, \qquad \epsilon = 10^{-6}
+
+(``RAMP_FLOOR``), a weight that rises through six decades, evenly in its logarithm, with
+zero slope at both ends. A task's influence on the solution is about ``w / (w + w_o)``
+against the weights ``w_o`` it competes with, so a ramp linear in the weight does
+almost all its work in the first ticks (at 1/50 of the ramp a weight-10 task already
+outweighs a 1e-2 posture 20 to 1); in the logarithm the change is spread over the ramp.
+The torque change per tick is bounded besides (:mod:`.solver`: transitions).
 
 Callbacks (set with :meth:`Activatable.setCallback`, names as ORCA's):
 ``onActivation()`` when ``activate()`` is called, ``onActivated()`` on the tick the ramp
@@ -25,9 +38,24 @@ from typing import Any
 
 from ...errors import SotpyError
 
-__all__ = ["CALLBACKS", "Activatable"]
+__all__ = ["CALLBACKS", "RAMP_FLOOR", "Activatable", "ramp_weight"]
 
 _SNAP = 1e-9  # ramps within this of 0 or 1 are snapped to it
+
+#: The weight factor of a task at the start of its ramp's smooth part (module doc).
+RAMP_FLOOR = 1e-6
+
+
+def ramp_weight(r: float) -> float:
+    """The weight factor ``rho(r)`` of a task whose ramp is ``r`` (module doc): 0 at 0,
+    1 at 1, increasing, flat at both ends."""
+    if r <= 0.0:
+        return 0.0
+    if r >= 1.0:
+        return 1.0
+    s = r * r * (3.0 - 2.0 * r)
+    return s * RAMP_FLOOR ** (1.0 - s)
+
 
 CALLBACKS = (
     "onActivation",

@@ -69,19 +69,21 @@ def dynamics_rows(robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.nda
 
 
 def friction_rows(c: ContactSpec) -> tuple[np.ndarray, np.ndarray]:
-    """``(G, h)`` with ``G f_c <= h`` the friction and CoP polyhedron of contact ``c``."""
-    k = c.mu / math.sqrt(2.0)
-    rows = [
-        [0, 0, -1] + [0] * (c.dim - 3),
-        [1, 0, -k] + [0] * (c.dim - 3),
-        [-1, 0, -k] + [0] * (c.dim - 3),
-        [0, 1, -k] + [0] * (c.dim - 3),
-        [0, -1, -k] + [0] * (c.dim - 3),
-    ]
-    h = [-c.fmin, 0, 0, 0, 0]
+    """``(G, h)`` with ``G f_c <= h`` the friction and CoP polyhedron of contact ``c``:
+    ``f_z >= fmin``, the ``facets``-sided pyramid inscribed in the cone, and for a 6-D
+    contact the CoP inside the sole shrunk by the margin and the torsion bound (see the
+    module doc)."""
+    n = int(c.facets)
+    pad = [0.0] * (c.dim - 3)
+    k = c.mu * math.cos(math.pi / n)
+    rows = [[0.0, 0.0, -1.0, *pad]]
+    for i in range(n):
+        phi = 2.0 * math.pi * i / n
+        rows.append([math.cos(phi), math.sin(phi), -k, *pad])
+    h = [-c.fmin] + [0.0] * n
     if c.dim == 6:
         ox, oy = c.offset
-        X, Y = c.length / 2, c.width / 2
+        X, Y = c.half_sizes
         # (ox - X) fz <= -ty <= (ox + X) fz ; (oy - Y) fz <= tx <= (oy + Y) fz
         rows += [
             [0, 0, -(ox + X), 0, -1, 0],
@@ -96,12 +98,34 @@ def friction_rows(c: ContactSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Constraint(Activatable):
-    """Base class: ``rows(robot, layout, dt) -> (C, lb, ub)``."""
+    """Base class: ``rows(robot, layout) -> (C, lb, ub)``, or the incremental pair
+    :meth:`count` and :meth:`write` (what the controller calls each tick)."""
 
     def bind(self, robot: RobotModel, layout: Layout) -> None:
         """Check the constraint against a model and layout."""
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(C, lb, ub)`` at the robot's current state (fresh arrays; by :meth:`write`)."""
+        m = self.count(robot, layout)
+        C, lo, hi = np.zeros((m, layout.n)), np.zeros(m), np.zeros(m)
+        self.write(robot, layout, C, lo, hi, True)
+        return C, lo, hi
+
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        """The number of rows (a change rebuilds the problem's buffers)."""
+        raise NotImplementedError
+
+    def write(
+        self,
+        robot: RobotModel,
+        layout: Layout,
+        C: np.ndarray,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        first: bool,
+    ) -> None:
+        """Write the rows into ``C`` (a view of the problem's buffer: zero if ``first``,
+        else what this constraint wrote at the previous tick) and the bounds."""
         raise NotImplementedError
 
 
@@ -143,18 +167,26 @@ class JointTorqueLimit(Constraint):
             eff if upper is None else upper,
             robot.na,
         )
-        self._rows: tuple | None = None
+        self._kept: tuple | None = None
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        # constant rows: rebuilt only when the layout or the bounds change
-        key = (layout, self.lower.tobytes(), self.upper.tobytes())
-        if self._rows is None or self._rows[0] != key:
+    def _bounds_kept(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kept joints, their lower and upper bounds): recomputed when the bounds change
+        (even in place)."""
+        key = (self.lower.tobytes(), self.upper.tobytes())
+        if self._kept is None or self._kept[0] != key:
             keep = np.flatnonzero(_keep(self.lower, self.upper))
-            C = np.zeros((len(keep), layout.n))
+            self._kept = (key, keep, _clip(self.lower[keep]), _clip(self.upper[keep]))
+        return self._kept[1:]
+
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        return len(self._bounds_kept()[0])
+
+    def write(self, robot, layout, C, lo, hi, first) -> None:
+        keep, lower, upper = self._bounds_kept()
+        if first:
             C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
-            self._rows = (key, C, _clip(self.lower[keep]), _clip(self.upper[keep]))
-        _, C, lo, hi = self._rows
-        return C.copy(), lo.copy(), hi.copy()
+        lo[:] = lower
+        hi[:] = upper
 
 
 class JointAccelerationLimit(Constraint):
@@ -164,11 +196,15 @@ class JointAccelerationLimit(Constraint):
         super().__init__(name)
         self.lower, self.upper = _bounds(name, "acceleration", lower, upper, robot.na)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        return int(np.count_nonzero(_keep(self.lower, self.upper)))
+
+    def write(self, robot, layout, C, lo, hi, first) -> None:
         keep = np.flatnonzero(_keep(self.lower, self.upper))
-        C = np.zeros((len(keep), layout.n))
-        C[np.arange(len(keep)), robot.actuated[keep]] = 1.0
-        return C, _clip(self.lower[keep]), _clip(self.upper[keep])
+        if first:
+            C[np.arange(len(keep)), robot.actuated[keep]] = 1.0
+        lo[:] = _clip(self.lower[keep])
+        hi[:] = _clip(self.upper[keep])
 
 
 def _horizon(name: str, h: float) -> float:
@@ -200,14 +236,18 @@ class JointVelocityLimit(Constraint):
             robot.na,
         )
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        return int(np.count_nonzero(_keep(self.lower, self.upper)))
+
+    def write(self, robot, layout, C, lo, hi, first) -> None:
         keep = np.flatnonzero(_keep(self.lower, self.upper))
         iv = robot.actuated[keep]
         h = self.horizon
-        C = np.zeros((len(keep), layout.n))
-        C[np.arange(len(keep)), iv] = 1.0  # (v_min - v) / h <= a <= (v_max - v) / h
+        if first:
+            C[np.arange(len(keep)), iv] = 1.0  # (v_min - v) / h <= a <= (v_max - v) / h
         v = robot.v[iv]
-        return C, (_clip(self.lower[keep]) - v) / h, (_clip(self.upper[keep]) - v) / h
+        lo[:] = (_clip(self.lower[keep]) - v) / h
+        hi[:] = (_clip(self.upper[keep]) - v) / h
 
 
 class JointPositionLimit(Constraint):
@@ -224,18 +264,23 @@ class JointPositionLimit(Constraint):
         self.iv = robot.iv1[keep]
         self.lower, self.upper = lo[keep], hi[keep]
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        return 2 * len(self.iq)
+
+    def write(self, robot, layout, C, lo, hi, first) -> None:
         h, dt = self.horizon, robot.dt
         m = len(self.iq)
         # rows scaled to a unit coefficient on a (bounds on a, rad/s^2): a row
         # dt^2 a <= ... would be met within the QP's tolerance by far too much
-        C = np.zeros((2 * m, layout.n))
-        C[np.arange(2 * m), np.tile(self.iv, 2)] = 1.0
+        if first:
+            C[np.arange(2 * m), np.tile(self.iv, 2)] = 1.0
         q, v = robot.q[self.iq], robot.v[self.iv]
-        pred = np.concatenate([q + h * v, q + dt * v])
-        scale = np.concatenate([np.full(m, 2.0 / (h * h)), np.full(m, 1.0 / (dt * dt))])
-        lo, hi = np.tile(self.lower, 2), np.tile(self.upper, 2)
-        return C, (lo - pred) * scale, (hi - pred) * scale
+        a, b = 2.0 / (h * h), 1.0 / (dt * dt)
+        ph, pt = q + h * v, q + dt * v
+        lo[:m] = (self.lower - ph) * a
+        lo[m:] = (self.lower - pt) * b
+        hi[:m] = (self.upper - ph) * a
+        hi[m:] = (self.upper - pt) * b
 
 
 class ContactState(Activatable):
@@ -262,6 +307,29 @@ class ContactState(Activatable):
         self.state = "active"
         self.ramp = 1.0
         self.scale: np.ndarray | None = None
+        #: the placement the contact feedback holds (``ContactSpec.kp``): the frame's
+        #: placement at the first tick after the contact was created or activated
+        self.reference: pin.SE3 | None = None
+
+    def activate(self) -> None:
+        if self.state in ("inactive", "deactivating"):
+            self.reference = None  # the contact holds where it lands
+        super().activate()
+
+    def feedback(self, robot: RobotModel) -> np.ndarray | None:
+        """``-kp e - kd nu`` (LOCAL, the contact's dim) of a unilateral contact with
+        feedback gains, or None; sets the reference at its first call."""
+        c = self.spec
+        if c.bilateral or (c.kp == 0.0 and c.kd in (None, 0.0)):
+            return None
+        fid = robot.frame_id(c.frame)
+        M = robot.data.oMf[fid]
+        if self.reference is None:
+            self.reference = pin.SE3(M)
+        kp, kd = c.gains
+        e = pin.log6(self.reference.actInv(M)).vector
+        nu = robot.frame_velocity(fid, _LOCAL)
+        return (-kp * e - kd * nu)[: c.dim]
 
 
 class ContactConstraint(Constraint):
@@ -272,87 +340,92 @@ class ContactConstraint(Constraint):
         super().__init__(name)
         self.states: dict[str, ContactState] = {}
         self._friction: dict[ContactSpec, tuple[np.ndarray, np.ndarray]] = {}  # constant
-        self._template: tuple | None = None  # (layout, C, lb, ub, slots): all active
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if all(self._state(c) == "active" for c in layout.contacts):
-            return self._active_rows(robot, layout)
-        return self._general_rows(robot, layout)
+    def _friction_rows(self, c: ContactSpec) -> tuple[np.ndarray, np.ndarray]:
+        fr = self._friction.get(c)
+        if fr is None:
+            fr = self._friction[c] = friction_rows(c)
+        return fr
 
-    def _state(self, c: ContactSpec) -> str:
-        st = self.states.get(c.key)
-        return "active" if st is None else st.state
-
-    def _active_rows(
-        self, robot: RobotModel, layout: Layout
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every contact active: the rows of :meth:`_general_rows`, from a template built
-        once per layout (friction rows are constant) with the Jacobians and drifts
-        written in place."""
-        cache = self._template
-        if cache is None or cache[0] is not layout:
-            C, lb, ub = self._general_rows(robot, layout)
-            slots, r = [], 0
-            for c in layout.contacts:
-                slots.append((c, r, r + c.dim))
-                r += c.dim if c.bilateral else c.dim + len(self._friction[c][1])
-            cache = self._template = (layout, C, lb, ub, slots)
-            return C.copy(), lb.copy(), ub.copy()
-        _, C, lb, ub, slots = cache
-        a = layout.a
-        for c, r0, r1 in slots:
-            C[r0:r1, a] = robot.contact_jacobian(c)
-            drift = robot.contact_drift(c)
-            np.negative(drift, out=lb[r0:r1])
-            np.negative(drift, out=ub[r0:r1])
-        return C.copy(), lb.copy(), ub.copy()
-
-    def _general_rows(
-        self, robot: RobotModel, layout: Layout
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        blocks, lbs, ubs = [], [], []
+    def structure(self, layout: Layout) -> tuple:
+        """What the row count depends on: each contact's state (and, while a bilateral
+        contact deactivates, whether it has a wrench to ramp from)."""
+        out = []
         for c in layout.contacts:
             st = self.states.get(c.key)
-            state = "active" if st is None else st.state
+            out.append("active" if st is None else (st.state, st.scale is None))
+        return tuple(out)
+
+    def _blocks(self, c: ContactSpec) -> tuple[str, int, int]:
+        """(state, friction rows, ramp rows) of a contact."""
+        st = self.states.get(c.key)
+        state = "active" if st is None else st.state
+        if state == "inactive":
+            return state, 0, 0
+        nf = 0 if c.bilateral else len(self._friction_rows(c)[1])
+        ramp = 0
+        if state in ("activating", "deactivating"):
+            if not c.bilateral:
+                ramp = 1
+            elif state == "deactivating" and st.scale is not None:
+                ramp = c.dim
+        return state, nf, ramp
+
+    def count(self, robot: RobotModel, layout: Layout) -> int:
+        m = 0
+        for c in layout.contacts:
+            _state, nf, ramp = self._blocks(c)
+            m += c.dim + nf + ramp
+        return m
+
+    def write(self, robot, layout, C, lo, hi, first) -> None:
+        r = 0
+        a = layout.a
+        for c in layout.contacts:
+            state, nf, ramp = self._blocks(c)
             sl = layout.f[c.key]
             d = c.dim
-            if state == "inactive":
-                C = np.zeros((d, layout.n))
-                C[np.arange(d), np.arange(sl.start, sl.stop)] = 1.0
-                blocks.append(C)
-                lbs.append(np.zeros(d))
-                ubs.append(np.zeros(d))
+            if state == "inactive":  # f_c = 0
+                if first:
+                    C[np.arange(r, r + d), np.arange(sl.start, sl.stop)] = 1.0
+                lo[r : r + d] = 0.0
+                hi[r : r + d] = 0.0
+                r += d
                 continue
-            C = np.zeros((d, layout.n))
-            C[:, layout.a] = robot.contact_jacobian(c)
-            drift = robot.contact_drift(c)
-            blocks.append(C)
-            lbs.append(-drift)
-            ubs.append(-drift)
-            if not c.bilateral:
-                G, hh = self._friction.get(c) or self._friction.setdefault(c, friction_rows(c))
-                C2 = np.zeros((len(hh), layout.n))
-                C2[:, sl] = G
-                blocks.append(C2)
-                lbs.append(np.full(len(hh), -np.inf))
-                ubs.append(hh)
-            if state == "active" or st is None:
-                continue
-            r = st.ramp
-            if not c.bilateral:
-                F = robot.weight if state == "activating" or st.scale is None else st.scale[2]
-                C3 = np.zeros((1, layout.n))
-                C3[0, sl.start + 2] = 1.0
-                blocks.append(C3)
-                lbs.append(np.array([-np.inf]))
-                ubs.append(np.array([r * max(float(F), 0.0)]))
-            elif state == "deactivating" and st.scale is not None:
-                C3 = np.zeros((d, layout.n))
-                C3[np.arange(d), np.arange(sl.start, sl.stop)] = 1.0
-                bound = r * np.abs(st.scale)
-                blocks.append(C3)
-                lbs.append(-bound)
-                ubs.append(bound)
-        if not blocks:
-            return np.zeros((0, layout.n)), np.zeros(0), np.zeros(0)
-        return np.vstack(blocks), np.concatenate(lbs), np.concatenate(ubs)
+            C[r : r + d, a] = robot.contact_jacobian(c)
+            rhs = self._rhs(robot, c)
+            lo[r : r + d] = rhs
+            hi[r : r + d] = rhs
+            r += d
+            if nf:
+                if first:  # constant rows and bounds
+                    G, h = self._friction_rows(c)
+                    C[r : r + nf, sl] = G
+                    lo[r : r + nf] = -np.inf
+                    hi[r : r + nf] = h
+                r += nf
+            if ramp:
+                st = self.states[c.key]
+                if not c.bilateral:
+                    F = robot.weight if state == "activating" or st.scale is None else st.scale[2]
+                    if first:
+                        C[r, sl.start + 2] = 1.0
+                    lo[r] = -np.inf
+                    hi[r] = st.ramp * max(float(F), 0.0)
+                else:
+                    if first:
+                        C[np.arange(r, r + d), np.arange(sl.start, sl.stop)] = 1.0
+                    bound = st.ramp * np.abs(st.scale)
+                    lo[r : r + d] = -bound
+                    hi[r : r + d] = bound
+                r += ramp
+
+    def _rhs(self, robot: RobotModel, c: ContactSpec) -> np.ndarray:
+        """The contact's desired spatial acceleration minus its drift: ``-Jdot v`` plus
+        the feedback (:meth:`ContactState.feedback`)."""
+        rhs = -robot.contact_drift(c)
+        st = self.states.get(c.key)
+        fb = None if st is None else st.feedback(robot)
+        if fb is not None:
+            rhs += fb
+        return rhs

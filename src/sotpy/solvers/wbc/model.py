@@ -34,6 +34,7 @@ effects, gravity, CoM) and then answers:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,7 @@ from ...errors import SotpyError
 __all__ = ["BilateralContactSpec", "ContactSpec", "Layout", "RobotModel"]
 
 LWA = pin.LOCAL_WORLD_ALIGNED
+_ACCELERATION = pin.KinematicLevel.ACCELERATION
 
 
 @dataclass(frozen=True)
@@ -54,11 +56,21 @@ class ContactSpec:
         frame: the Pinocchio frame of the contact; its z axis is the contact normal
             (pointing out of the environment, into the robot's body).
         dim: 6 (a surface contact: the wrench at the frame origin) or 3 (a point: force).
-        mu: friction coefficient (> 0); the cone is the inner pyramid
-            ``|f_x|, |f_y| <= mu / sqrt(2) f_z``.
-        length, width: the rectangle of a 6-D contact (m) in the frame's xy plane,
-            along x and y, centred at ``offset`` (m): the CoP must stay inside.
+        mu: friction coefficient (> 0); the cone is approximated by the pyramid of
+            ``facets`` faces inscribed in it, ``cos(2 pi k / n) f_x + sin(2 pi k / n) f_y
+            <= mu cos(pi / n) f_z`` (``n = facets``, k = 0..n-1: 4 facets lose up to 29 %
+            of the cone along the diagonals of the frame's axes, 8 facets 7.6 %).
+        length, width: the real sole of a 6-D contact (m), a rectangle in the frame's xy
+            plane, along x and y, centred at ``offset`` (m).
         fmin: minimum normal force (N, >= 0).
+        margin: the CoP is kept ``margin`` (m, >= 0) inside the sole on every side (the
+            constraint's rectangle is ``(length - 2 margin) x (width - 2 margin)``).
+        facets: the number of faces of the friction pyramid (>= 3).
+        kp, kd: feedback of the contact frame's pose and velocity in the contact
+            constraint (1/s^2, 1/s, >= 0; ``kd`` None: ``2 sqrt(kp)``): the frame's LOCAL
+            spatial acceleration is asked to be ``-kp e - kd nu``, ``e`` the pose error
+            ``log6(M_ref^-1 M)`` from the placement the contact had when it was created
+            or activated, ``nu`` its LOCAL twist (linear part only for a point contact).
     """
 
     frame: str
@@ -68,6 +80,21 @@ class ContactSpec:
     width: float = 0.1
     offset: tuple[float, float] = (0.0, 0.0)
     fmin: float = 0.0
+    margin: float = 0.0
+    facets: int = 8
+    kp: float = 0.0
+    kd: float | None = None
+
+    @property
+    def half_sizes(self) -> tuple[float, float]:
+        """``(X, Y)``: the half-lengths (m) of the CoP's rectangle (the sole minus the
+        margin)."""
+        return self.length / 2 - self.margin, self.width / 2 - self.margin
+
+    @property
+    def gains(self) -> tuple[float, float]:
+        """``(kp, kd)`` of the contact feedback (``kd`` defaulted)."""
+        return self.kp, (2.0 * math.sqrt(self.kp) if self.kd is None else self.kd)
 
     @property
     def key(self) -> str:
@@ -158,10 +185,16 @@ class RobotModel:
         self.minus_St = -self.S.T  # the torque columns of the equations of motion
         self._a0 = np.zeros(self.nv)
         self._strict_lower = np.tril(np.ones((self.nv, self.nv), dtype=bool), -1)
+        self.M = np.zeros((self.nv, self.nv))
+        self.b = np.zeros(self.nv)
+        # per-tick caches of the contact Jacobians and drifts (cleared by update)
+        self._jac: dict[str, np.ndarray] = {}
+        self._drift: dict[str, np.ndarray] = {}
         self._g: np.ndarray | None = None
         self._gdata: pin.Data | None = None
         self.dt = 0.001  # the control period of the tick (s), set by the controller
         self.mass = float(pin.computeTotalMass(model))
+        self._weight = self.mass * float(np.linalg.norm(model.gravity.linear))
         self._fids: dict[str, int] = {}  # frame name -> id (the model is fixed)
         self.q: np.ndarray | None = None
         self.v: np.ndarray | None = None
@@ -199,12 +232,14 @@ class RobotModel:
         pin.computeAllTerms(m, d, q, v)  # M (upper), nle, joint Jacobians, com, Jcom
         pin.forwardKinematics(m, d, q, v, self._a0)  # data.v, data.a at a = 0: drifts
         pin.updateFramePlacements(m, d)
-        pin.centerOfMass(m, d, q, v, self._a0, False)  # vcom, acom (a = 0: dJcom v)
-        M = d.M.copy()
+        pin.centerOfMass(m, d, _ACCELERATION, False)  # vcom, acom of data.a (dJcom v)
+        M = self.M
+        np.copyto(M, d.M)
         np.copyto(M, M.T, where=self._strict_lower)  # Pinocchio fills the upper triangle
-        self.M = M
-        self.b = d.nle.copy()
+        np.copyto(self.b, d.nle)
         self._g = None
+        self._jac.clear()
+        self._drift.clear()
         self.q = q.copy()
         self.v = v.copy()
 
@@ -237,7 +272,14 @@ class RobotModel:
 
     def contact_jacobian(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
         """``J_c`` (dim x nv): LOCAL frame Jacobian (first ``dim`` rows) of a contact, or
-        ``J_rel`` of a bilateral one (:class:`BilateralContactSpec`)."""
+        ``J_rel`` of a bilateral one (:class:`BilateralContactSpec`); computed once per
+        :meth:`update` (do not modify it)."""
+        J = self._jac.get(c.key)
+        if J is None:
+            J = self._jac[c.key] = self._contact_jacobian(c)
+        return J
+
+    def _contact_jacobian(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
         if not c.bilateral:
             return self.frame_jacobian(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
         fa, fb = self.frame_id(c.frame_a), self.frame_id(c.frame_b)
@@ -245,7 +287,14 @@ class RobotModel:
         return self.frame_jacobian(fb, pin.LOCAL) - M.action @ self.frame_jacobian(fa, pin.LOCAL)
 
     def contact_drift(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
-        """``Jdot_c v`` (LOCAL spatial drift; ``drift_rel`` of a bilateral contact)."""
+        """``Jdot_c v`` (LOCAL spatial drift; ``drift_rel`` of a bilateral contact); once
+        per :meth:`update` (do not modify it)."""
+        dr = self._drift.get(c.key)
+        if dr is None:
+            dr = self._drift[c.key] = self._contact_drift(c)
+        return dr
+
+    def _contact_drift(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
         if not c.bilateral:
             return self.frame_drift(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
         m, d = self.model, self.data
@@ -259,8 +308,8 @@ class RobotModel:
 
     @property
     def weight(self) -> float:
-        """The robot's weight ``m |g|`` (N)."""
-        return self.mass * float(np.linalg.norm(self.model.gravity.linear))
+        """The robot's weight ``m |g|`` (N; the model's gravity when it was built)."""
+        return self._weight
 
     # -- centre of mass -----------------------------------------------------------------
     @property
@@ -273,8 +322,10 @@ class RobotModel:
 
     @property
     def Jcom(self) -> np.ndarray:
-        return self.data.Jcom.copy()
+        """The CoM Jacobian (3 x nv, world; Pinocchio's array: do not modify it)."""
+        return self.data.Jcom
 
     @property
     def com_drift(self) -> np.ndarray:
-        return self.data.acom[0].copy()
+        """``dJcom v`` (3, m/s^2, world; Pinocchio's array: do not modify it)."""
+        return self.data.acom[0]

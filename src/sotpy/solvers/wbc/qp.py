@@ -2,7 +2,7 @@ r"""The one-level weighted QP of a tick, in the reduced variables ``y = (a, f)``
 
 The problem over ``chi = (a, tau, f)`` (see :mod:`.solver`)::
 
-    min_chi  1/2 sum_k ||W_k^(1/2) (E_k chi - f_k)||^2 + 1/2 eps ||chi||^2
+    min_chi  1/2 sum_k ||W_k^(1/2) (E_k chi - f_k)||^2 + 1/2 eps ||(a, f)||^2
     s.t.     A_dyn chi = c_dyn,   lb <= C chi <= ub
 
 has the torques given by the actuated rows ``r`` of the equations of motion,
@@ -12,7 +12,9 @@ unactuated rows ``u`` as equalities is the optimum over ``chi``. Every row block
 ``(E, f)`` maps to ``(E_a | E_f) + E_tau T_tau`` and ``f - E_tau t_tau``; the product is
 skipped when ``E_tau`` is zero (acceleration, CoM and contact rows), so the reduced data
 cost one product per block that touches the torques (torque tasks and limits) instead
-of ``T^T H T``. The regularisation becomes ``eps (||y||^2 + ||T_tau y + t_tau||^2)``.
+of ``T^T H T``. The regularisation ``eps ||y||^2`` is on the accelerations and the
+wrenches only (the torques are their function), so that the Hessian's force block is
+coupled to the accelerations' only by rows that touch both (torque rows).
 
 Solving. The active set of the previous tick is the guess: the KKT system of the
 equalities and the guessed active rows (each at its bound),
@@ -38,12 +40,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
-from ..._jit import c_float64, refused
+from ..._jit import refused
 from ...errors import SotpyError
 from . import _kernels
 from .model import Layout
 
-__all__ = ["DUAL_TOL", "PRIMAL_TOL", "WeightedQP"]
+__all__ = ["DUAL_TOL", "PRIMAL_TOL", "WeightedQP", "pack", "packed_views"]
 
 #: Relative primal tolerance of an accepted guess: a row may exceed its bound by
 #: ``PRIMAL_TOL * (1 + |bound|)``.
@@ -86,18 +88,19 @@ class WeightedQP:
         # the compiled kernels take the actuated rows as the last ones (a free-flyer
         # root first, or none): true of every RobotModel
         tail = isinstance(self.actuated, slice) and (self.actuated.start == _stop(self.unactuated))
-        if jit and (_kernels.reduce is None or not tail):
+        if jit and (_kernels.solve is None or not tail):
             raise SotpyError(
                 "WeightedQP: compiled kernels unavailable (numba missing, SOTPY_JIT=0,"
                 " or actuated joints that are not the last velocities)"
             )
-        self.jit = bool(_kernels.reduce is not None and tail) if jit is None else bool(jit)
+        self.jit = bool(_kernels.solve is not None and tail) if jit is None else bool(jit)
         if self.jit:
             _kernels.warm_up()
         self.guess_hits = 0
         self.daqp_solves = 0
         self.last_method = ""
         self._key: tuple | None = None
+        self._ws: tuple | None = None  # (sizes, workspace, views) of the compiled kernel
         self._active = np.zeros(0, dtype=np.intp)  # indices into the constraint rows
         self._upper = np.zeros(0, dtype=bool)  # at the upper bound (else the lower)
 
@@ -121,10 +124,8 @@ class WeightedQP:
         Au[:, :nv] = A[u, :nv]
         Au[:, nv:] = A[u, nv + na :]
         cu = c[u]
-        H = Tt.T @ Tt
-        H.flat[:: ny + 1] += 1.0
-        H *= regularisation
-        g = regularisation * (Tt.T @ tt)
+        H = regularisation * np.eye(ny)
+        g = np.zeros(ny)
         if tasks:
             E = np.vstack([t[1] for t in tasks]) if len(tasks) > 1 else tasks[0][1]
             f = np.concatenate([t[2] for t in tasks])
@@ -143,71 +144,115 @@ class WeightedQP:
         self.jit = False
         refused("WeightedQP", exc)
 
-    def _reduce_compiled(self, layout: Layout, dyn, cons, tasks, regularisation: float):
-        A, c = dyn
+    # --------------------------------------------------------------------- solve
+    def solve(
+        self, layout: Layout, dyn, cons, tasks, regularisation: float
+    ) -> tuple[np.ndarray | None, str]:
+        """``(chi, "")`` at the optimum, or ``(None, reason)``; ``tasks`` as
+        :meth:`.solver.WholeBodyController.problem` returns them."""
         if tasks:
             E = np.vstack([t[1] for t in tasks]) if len(tasks) > 1 else tasks[0][1]
             f = np.concatenate([t[2] for t in tasks])
             w = np.concatenate([t[3] for t in tasks])
         else:
             E, f, w = np.zeros((0, layout.n)), np.zeros(0), np.zeros(0)
-        C, lo, hi = cons
-        args = [c_float64(a) for a in (A, c, E, f, w, C, lo, hi)]
-        return _kernels.reduce(*args, float(regularisation), layout.nv, layout.na)
+        return self.solve_rows(layout, dyn[0], dyn[1], E, f, w, *cons, regularisation)
 
-    # --------------------------------------------------------------------- solve
-    def solve(
-        self, layout: Layout, dyn, cons, tasks, regularisation: float
+    def solve_rows(
+        self,
+        layout: Layout,
+        A,
+        c,
+        E,
+        f,
+        w,
+        C,
+        lo,
+        hi,
+        regularisation: float,
+        packed=None,
+        keep: int = 0,
     ) -> tuple[np.ndarray | None, str]:
-        """``(chi, "")`` at the optimum, or ``(None, reason)``."""
-        data = None
+        """:meth:`solve` with the task rows stacked (``E`` m x n, ``f``, ``w`` = diag W).
+        ``packed``: the flat array the arrays are views of, laid out by
+        :func:`._kernels.data_layout` (the controller's buffers are); otherwise they
+        are copied into one for the compiled kernel. ``keep``: the constraint rows of
+        the previous solve kept at the same places when the number of rows changed
+        (rows appended or removed at the end): its active set is still a guess there."""
+        nv, na, n = layout.nv, layout.na, layout.n
+        m, mc = E.shape[0], C.shape[0]
+        key = (n, mc, nv - na)
+        if key != self._key and self._key is not None and keep and self._key[0::2] == key[0::2]:
+            inside = self._active < min(keep, mc)
+            self._active, self._upper = self._active[inside], self._upper[inside]
+            self._key = key
+        guess = key == self._key
+        y = None
+        data = views = None
         if self.jit:
             try:
-                status, data = self._reduce_compiled(layout, dyn, cons, tasks, regularisation)
+                if packed is None:
+                    packed = pack(layout, A, c, E, f, w, C, lo, hi)
+                ws, views = self._workspace(nv, na, n, m, mc)
+                args = (packed, ws, nv, na, n, m, mc, float(regularisation))
+                status, ok = self._kernel(*args, guess)
+                data = views
+                y = views[9] if ok else None
             except TypeError as exc:  # argument types the kernel was not compiled for
                 self._stop_jit(exc)
+                data = None
         if data is None:
-            data = self.reduce(layout, dyn, cons, tasks, regularisation)
-            lo, hi = data[5], data[6]
-            status = 1 if np.isnan(lo).any() or np.isnan(hi).any() else 0
-            status = status or (2 if (lo > hi + 1e-12).any() else 0)
+            data = self.reduce(layout, (A, c), (C, lo, hi), [(0, E, f, w)], regularisation)
+            lo_y, hi_y = data[5], data[6]
+            status = 1 if np.isnan(lo_y).any() or np.isnan(hi_y).any() else 0
+            status = status or (2 if (lo_y > hi_y + 1e-12).any() else 0)
+            if not status and guess:
+                y = self._try_guess(*data[:7], lo == hi)
         if status:
             return None, _STATUS[status]
-        H, g, Au, cu, Cy, lo, hi, Tt, tt = data
-        key = (layout.n, Cy.shape[0], Au.shape[0])
-        eq = None
-        y = None
-        if key == self._key:
-            if self.jit:
-                try:
-                    ok, y = _kernels.guess(
-                        H, g, Au, cu, Cy, lo, hi, self._active, self._upper,
-                        PRIMAL_TOL, DUAL_TOL, _LAMBDA_MAX,
-                    )  # fmt: skip
-                except (np.linalg.LinAlgError, ZeroDivisionError):  # singular KKT matrix
-                    ok = False
-                except TypeError as exc:
-                    self._stop_jit(exc)
-                    ok = False
-                y = y if ok else None
-            else:
-                eq = lo == hi
-                y = self._try_guess(H, g, Au, cu, Cy, lo, hi, eq)
+        H, g, Au, cu, Cy, lo_y, hi_y, Tt, tt = data[:9]
         if y is not None:
             self.guess_hits += 1
             self.last_method = "guess"
         else:
-            y, reason = self._daqp(H, g, Au, cu, Cy, lo, hi, lo == hi if eq is None else eq, key)
+            y, reason = self._daqp(H, g, Au, cu, Cy, lo_y, hi_y, lo == hi, key)
             if y is None:
                 return None, reason
             self.daqp_solves += 1
             self.last_method = "daqp"
-        nv, na = layout.nv, layout.na
-        chi = np.empty(layout.n)
+            # polish: DAQP's active set solved exactly (DAQP stops at its tolerance,
+            # far from the optimum along the nearly flat directions of the wrenches)
+            exact = None
+            if views is not None and data is views:
+                if self._kernel(*args, True)[1]:
+                    exact = views[9]
+            else:
+                exact = self._try_guess(H, g, Au, cu, Cy, lo_y, hi_y, lo == hi)
+            if exact is not None:
+                y = exact
+        chi = np.empty(n)
         chi[:nv] = y[:nv]
         chi[nv + na :] = y[nv:]
         chi[nv : nv + na] = Tt @ y + tt
         return chi, ""
+
+    def _kernel(self, packed, ws, nv, na, n, m, mc, reg, guess) -> tuple[int, bool]:
+        return _kernels.solve(
+            packed, ws, self._active, self._upper, nv, na, n, m, mc, reg, guess,
+            PRIMAL_TOL, DUAL_TOL, _LAMBDA_MAX,
+        )  # fmt: skip
+
+    def _workspace(self, nv: int, na: int, n: int, m: int, mc: int) -> tuple[np.ndarray, list]:
+        """The kernel's workspace for these sizes (kept) and its views ``(H, g, Au, cu,
+        Cy, lo_y, hi_y, Tt, tt, y)``."""
+        dims = (nv, na, n, m, mc)
+        if self._ws is None or self._ws[0] != dims:
+            lay = _kernels.work_layout(*dims)
+            ws = np.zeros(lay["size"][0])
+            names = ("H", "g", "Au", "cu", "Cy", "lo_y", "hi_y", "Tt", "tt", "y")
+            views = [_view(ws, *lay[k]) for k in names]
+            self._ws = (dims, ws, views)
+        return self._ws[1], self._ws[2]
 
     def _try_guess(self, H, g, Au, cu, Cy, lo, hi, eq) -> np.ndarray | None:
         ny = H.shape[0]
@@ -271,6 +316,26 @@ class WeightedQP:
         self._upper = np.abs(v - hi[act]) <= np.abs(v - lo[act])
         self._key = key
         return y, ""
+
+
+def _view(buf: np.ndarray, offset: int, shape: tuple) -> np.ndarray:
+    return buf[offset : offset + int(np.prod(shape))].reshape(shape)
+
+
+def pack(layout: Layout, A, c, E, f, w, C, lo, hi) -> np.ndarray:
+    """The problem's arrays copied into one flat array (:func:`._kernels.data_layout`)."""
+    lay = _kernels.data_layout(layout.nv, layout.na, layout.n, E.shape[0], C.shape[0])
+    data = np.empty(lay["size"][0])
+    for name, arr in zip(("A", "c", "E", "f", "w", "C", "lo", "hi"), (A, c, E, f, w, C, lo, hi),
+                         strict=True):  # fmt: skip
+        _view(data, *lay[name])[...] = arr
+    return data
+
+
+def packed_views(data: np.ndarray, nv: int, na: int, n: int, m: int, mc: int) -> dict:
+    """The views ``A, c, E, f, w, C, lo, hi`` of a packed array."""
+    lay = _kernels.data_layout(nv, na, n, m, mc)
+    return {k: _view(data, *v) for k, v in lay.items() if k != "size"}
 
 
 def _to_y(E: np.ndarray, f: np.ndarray, nv: int, na: int, Tt: np.ndarray, tt: np.ndarray):

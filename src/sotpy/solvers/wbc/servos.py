@@ -14,6 +14,18 @@ velocity, angular velocity), the desired ``(R_d, p_d)``, ``nu_d``, ``alpha_d``:
 ``K_p`` (6, 1/s^2) per axis, ``K_d`` (6, 1/s) defaults to ``2 sqrt(K_p)`` (critical
 damping). The joint PD and the CoM PD are the same law on vectors.
 
+PID with anti-windup (``pid_step``): the same law plus the integral of the error,
+
+.. math::
+
+    I_k = \mathrm{clamp}(I_{k-1} + e_k \, \Delta t, -I_{max}, I_{max}), \qquad
+    a_{des} = \alpha_d - K_p e_k - K_d (\nu - \nu_d) - K_i I_k
+
+``K_i`` (1/s^3) per axis, ``I`` in m s or rad s, clamped per axis to ``I_max`` (the
+anti-windup: a saturated task, or one held off its goal by a constraint, cannot wind the
+integral up beyond ``K_i I_max`` of acceleration). It removes the steady error a
+weighted QP leaves when tasks compete (a posture task pulling against a hand task).
+
 Minimum jerk from ``M_0`` to ``M_1`` in ``T`` seconds: ``s(x) = 10x^3 - 15x^4 + 6x^5``,
 ``x = clamp(t/T, 0, 1)``; ``p = p_0 + s (p_1 - p_0)``, ``R = R_0 exp(s w)`` with
 ``w = log3(R_0^T R_1)``; velocity ``(s' (p_1 - p_0), s' R_0 w)`` and acceleration
@@ -34,6 +46,7 @@ __all__ = [
     "joint_pd",
     "min_jerk",
     "min_jerk_scalar",
+    "pid_step",
     "pose_error",
     "pose_pd",
     "wrench_pi",
@@ -138,3 +151,21 @@ def wrench_pi(
     e = wd - w
     integral = np.clip(integral + e * dt, -limit, limit)
     return wd + Kp * e + Ki * integral, integral
+
+
+def pid_step(
+    e: np.ndarray,
+    de: np.ndarray,
+    ad: np.ndarray,
+    integral: np.ndarray,
+    dt: float,
+    Kp: np.ndarray,
+    Kd: np.ndarray,
+    Ki: np.ndarray,
+    limit: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the PID (module doc): the error ``e``, its rate ``de`` (``nu - nu_d``),
+    the feed-forward ``ad``; returns ``(a_des, I+)`` with ``I+ = clamp(I + e dt, -limit,
+    limit)``."""
+    integral = np.clip(integral + e * dt, -limit, limit)
+    return np.asarray(ad) - Kp * e - Kd * de - Ki * integral, integral

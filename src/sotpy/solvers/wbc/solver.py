@@ -11,10 +11,11 @@ same optimum, fewer variables), solved by one KKT solve on the previous tick's a
 set when that is verified optimal, else by DAQP (dual active set); either way
 equalities and active constraints hold to rounding (:mod:`.qp`)::
 
-    min_chi  sum_k ||W_k^(1/2) (E_k chi - f_k)||^2 + eps ||chi||^2
+    min_chi  sum_k ||W_k^(1/2) (E_k chi - f_k)||^2 + eps ||(a, f)||^2
     s.t.     A_dyn chi = c_dyn,   lb <= C chi <= ub
 
-``eps`` (``regularisation``, default 1e-8) only makes the Hessian positive definite;
+``eps`` (``regularisation``, default 1e-8) only makes the Hessian positive definite (the
+torques, functions of ``(a, f)`` through the dynamics, are not in it);
 a :class:`RegularisationTask` is the user-visible regularisation. Task levels are ignored.
 
 ``"MultiLevelWeighted"`` (hybrid: strict levels, weights inside a level), through
@@ -36,6 +37,25 @@ in its level is enforced fully as soon as its ramp is > 0: ramps are gradual rel
 to the other tasks of the same level only (and exactly gradual in the weighted
 strategy). Generalised (continuous) priorities are not implemented.
 
+Smooth transitions (a bounded torque change per tick). From an activation or a
+deactivation (of a task, a constraint or a contact) or a change of strategy until the
+torques have settled (every ramp at its end and no torque at its rate bound), each
+joint's torque may change by at most ``rate_j dt`` per tick:
+
+    tau_prev - rate dt <= tau <= tau_prev + rate dt
+
+(``tau_prev`` the torque of the previous tick; ``rate`` of :meth:`setTorqueRateLimit`,
+N m/s, by default the joint's effort limit per ``RATE_TIME`` = 0.1 s: 3 N m per 1 ms
+tick on a 300 N m knee, 1 N m on a 100 N m ankle), hard rows like the torque limits.
+The activation ramps themselves are smooth (:mod:`.activation`). If the rows make the
+problem infeasible (a sudden loss of a contact), the weighted strategy solves it again
+without them (:attr:`Solution.rate_limited` is then False); the multi-level strategy
+puts them in a level of their own after the hard one (their least violation).
+
+Warnings (:class:`~sotpy.errors.SotpyWarning`, once until the condition clears): a
+floating-base robot with no active contact (its base is unconstrained: it falls), or a
+robot with nothing active (no task, constraint or contact).
+
 No solution (the QP infeasible or failed, the hard level not met, a non-finite
 result): :class:`Solution` with ``found = False`` and the fallback: ``tau = S g(q)``
 (gravity compensation at the current configuration, clipped to the torque limits if a
@@ -45,26 +65,31 @@ torque-limit constraint is set), ``a = 0``, ``f = 0``.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import SotpyError
+from ...errors import SotpyError, SotpyWarning
 from ..hierarchy import HierarchySolver
+from ._kernels import data_layout
 from .constraints import (
     Constraint,
     ContactConstraint,
     ContactState,
     JointTorqueLimit,
-    dynamics_rows,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
-from .qp import WeightedQP
-from .tasks import Task
+from .qp import WeightedQP, packed_views
+from .tasks import ContactWrenchCost, Task
 
-__all__ = ["STRATEGIES", "Solution", "WholeBodyController"]
+__all__ = ["RATE_TIME", "STRATEGIES", "Solution", "WholeBodyController"]
 
 STRATEGIES = ("OneLevelWeighted", "MultiLevelWeighted")
+
+#: The default torque rate bound of transitions: each joint's effort limit per
+#: ``RATE_TIME`` seconds (N m/s).
+RATE_TIME = 0.1
 
 
 @dataclass
@@ -73,10 +98,12 @@ class Solution:
 
     Attributes:
         chi: the full solution ``(a, tau, f)`` (the fallback's when not found).
-        a, tau, f: its blocks (``f`` every contact's wrench, layout order).
+        a, tau, f: its blocks, views of ``chi`` (``f`` every contact's wrench, layout
+            order).
         found: whether the problem was solved (constraints met).
         reason: why not, when not found ("" otherwise).
         dynamics_residual: ``||A_dyn chi - c_dyn||_inf`` of the solution.
+        rate_limited: whether the torque-rate rows of a transition were enforced.
     """
 
     chi: np.ndarray
@@ -86,6 +113,7 @@ class Solution:
     found: bool
     reason: str = ""
     dynamics_residual: float = 0.0
+    rate_limited: bool = False
 
 
 class WholeBodyController:
@@ -115,17 +143,49 @@ class WholeBodyController:
         self.setRegularisation(regularisation)
         self.hierarchy = HierarchySolver()
         self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
+        self.contact_cost = ContactWrenchCost()
+        eff = np.asarray(self.robot.model.effortLimit, dtype=float)[self.robot.actuated]
+        rate = np.where(np.isfinite(eff) & (eff > 0) & (eff < 1e30), eff / RATE_TIME, np.inf)
+        self.torque_rate = rate
+        self._rate_keep = np.flatnonzero(np.isfinite(rate))
+        self._assembly: _Assembly | None = None
+        self.transition = False  # a transition in progress: the torque rate is bounded
+        self._rate_rows = 0  # torque-rate rows (the last constraint rows) of the last problem
+        self._keep_rows = 0  # constraint rows unchanged since the previous problem's
+        self._warned: set[str] = set()
         self.last: Solution | None = None
         self.last_dynamics: tuple[np.ndarray, np.ndarray] | None = None
         self.last_constraints: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # -- configuration --------------------------------------------------------------------
     def setStrategy(self, strategy: str) -> None:
+        """``"OneLevelWeighted"`` or ``"MultiLevelWeighted"``; a change at run time is a
+        transition (the torques move to the new strategy's at the bounded rate)."""
         if strategy not in STRATEGIES:
             raise SotpyError(
                 f"WholeBodyController: unknown strategy {strategy!r}; expected one of {STRATEGIES}"
             )
+        if getattr(self, "strategy", strategy) != strategy:
+            self.transition = True
         self.strategy = strategy
+
+    def setTorqueRateLimit(self, rate: object) -> None:
+        """The torque rate bound of transitions (N m/s; one value or one per actuated
+        joint, > 0, ``inf``: none): ``|tau - tau_prev| <= rate dt`` per tick."""
+        r = np.asarray(rate, dtype=float)
+        r = np.full(self.robot.na, float(r)) if r.ndim == 0 else r
+        if r.shape != (self.robot.na,) or np.isnan(r).any() or (r <= 0).any():
+            raise SotpyError(
+                f"WholeBodyController: the torque rate limit must be one value or "
+                f"{self.robot.na} values > 0 (N m/s, inf: none), got {rate!r}"
+            )
+        self.torque_rate = r.copy()
+        self._rate_keep = np.flatnonzero(np.isfinite(r))
+
+    def setContactCostWeight(self, weight: float) -> None:
+        """Weight of the contact wrench distribution cost (:class:`ContactWrenchCost`,
+        >= 0; 0 removes it)."""
+        self.contact_cost.setWeight(weight)
 
     def setRegularisation(self, eps: float) -> None:
         eps = float(eps)
@@ -167,6 +227,24 @@ class WholeBodyController:
                 raise SotpyError(f"contact {c.frame!r}: length and width must be > 0")
             if not (math.isfinite(c.fmin) and c.fmin >= 0):
                 raise SotpyError(f"contact {c.frame!r}: fmin must be finite and >= 0")
+            if c.dim == 6 and not (
+                math.isfinite(c.margin) and 0 <= c.margin < min(c.length, c.width) / 2
+            ):
+                raise SotpyError(
+                    f"contact {c.frame!r}: the margin must be >= 0 and less than half the "
+                    f"sole's length and width (m), got {c.margin}"
+                )
+            if isinstance(c.facets, bool) or int(c.facets) != c.facets or c.facets < 3:
+                raise SotpyError(
+                    f"contact {c.frame!r}: the friction pyramid needs an integer number of "
+                    f"facets >= 3, got {c.facets!r}"
+                )
+            kd_ok = c.kd is None or (math.isfinite(c.kd) and c.kd >= 0)
+            if not (math.isfinite(c.kp) and c.kp >= 0 and kd_ok):
+                raise SotpyError(
+                    f"contact {c.frame!r}: the feedback gains must be finite and >= 0, got "
+                    f"kp={c.kp}, kd={c.kd}"
+                )
             if c.frame in seen:
                 raise SotpyError(f"contact {c.frame!r} given twice")
             seen.add(c.frame)
@@ -198,7 +276,10 @@ class WholeBodyController:
 
     def activate(self, name: str) -> None:
         """Start the activation ramp of a task, constraint or contact."""
-        self.item(name).activate()
+        x = self.item(name)
+        if x.state in ("inactive", "deactivating"):
+            self.transition = True
+        x.activate()
 
     def deactivate(self, name: str) -> None:
         """Start the deactivation ramp of a task, constraint or contact; a contact's wrench
@@ -210,6 +291,8 @@ class WholeBodyController:
                 x.scale = last.chi[self.layout.f[name]].copy()
             else:
                 x.scale = None
+        if x.state in ("active", "activating"):
+            self.transition = True
         x.deactivate()
 
     def addTask(self, task: Task) -> Task:
@@ -239,10 +322,14 @@ class WholeBodyController:
 
     def activateTasksAndConstraints(self) -> None:
         for x in self._all():
+            if x.state in ("inactive", "deactivating"):
+                self.transition = True
             x.activate()
 
     def deactivateTasksAndConstraints(self) -> None:
         for x in self._all():
+            if x.state in ("active", "activating"):
+                self.transition = True
             x.deactivate()
 
     def tasksAndConstraintsDeactivated(self) -> bool:
@@ -264,43 +351,146 @@ class WholeBodyController:
         if not (math.isfinite(dt) and dt > 0):
             raise SotpyError(f"WholeBodyController: dt must be finite and > 0 (s), got {dt}")
         self.robot.dt = dt
-        live = [x for x in [*self._all(), *self.contact_states.values()] if x.begin(t, dt)]
+        last = self.last
+        if last is not None and last.found and last.f.shape == (self.layout.nf,):
+            self.contact_cost.observe(self.layout, last.f)  # the loads of the cost's rows
+        objects = [*self._all(), *self.contact_states.values()]
+        live = [x for x in objects if x.begin(t, dt)]
+        ramping = any(x.state in ("activating", "deactivating") for x in objects)
+        self._check_active(live)
         try:
-            sol = self.solve()
+            sol = self.solve(rate=self.transition or ramping)
         finally:
             for x in live:
                 x.end(t, dt)
+        if self.transition and not ramping and not self._at_rate_bound(sol):
+            self.transition = False  # settled: the torques caught up
         self.last = sol
         return sol
 
+    def _warn(self, key: str, message: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            warnings.warn(f"WholeBodyController: {message}", SotpyWarning, stacklevel=4)
+
+    def _check_active(self, live: list) -> None:
+        """The warnings of the module doc (once until the condition clears)."""
+        contacts = any(st.state != "inactive" for st in self.contact_states.values())
+        if self.robot.free_flyer and not contacts:
+            self._warn(
+                "free",
+                "no contact is active: the floating base is unconstrained and the robot "
+                "falls (activate a contact, or expect a flight phase)",
+            )
+        else:
+            self._warned.discard("free")
+        if not live:
+            self._warn(
+                "nothing",
+                "nothing is active (no task, constraint or contact): the solution is the "
+                "regularisation's, the robot is not controlled",
+            )
+        else:
+            self._warned.discard("nothing")
+
+    def _rate_bounds(self, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The torque bounds of a transition, or None (no previous torque)."""
+        last = self.last
+        if last is None or last.tau.shape != (self.robot.na,):
+            return None
+        if not np.isfinite(last.tau).all():
+            return None
+        step = self.torque_rate * dt
+        return last.tau - step, last.tau + step
+
+    def _at_rate_bound(self, sol: Solution) -> bool:
+        """Whether a torque of ``sol`` sits at its rate bound (the transition goes on)."""
+        if not sol.rate_limited or self.last is None:
+            return False
+        step = self.torque_rate * self.robot.dt
+        return bool(np.any(np.abs(sol.tau - self.last.tau) >= step * (1.0 - 1e-6)))
+
     def problem(
-        self,
+        self, rate: bool = False
     ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], list]:
         """The current dynamics ``(A, c)``, constraints ``(C, lb, ub)`` and tasks
-        ``[(level, E, f, w)]`` (w = diag W), from the last :meth:`RobotModel.update`."""
+        ``[(level, E, f, w)]`` (w = diag W; level -1: the contact wrench cost), from the
+        last :meth:`RobotModel.update`; ``rate``: with the torque-rate rows of a
+        transition (the last constraint rows, if a previous torque exists).
+
+        The arrays are views of buffers kept from tick to tick (rebuilt when the set of
+        rows changes: a task or constraint activated, a contact's state): valid until
+        the next call; copy them to keep them. Each task and constraint writes its rows
+        in place (:meth:`.tasks.Task.write`, :meth:`.constraints.Constraint.write`),
+        the constant ones once."""
         robot, layout = self.robot, self.layout
-        dyn = dynamics_rows(robot, layout)
-        Cs, lbs, ubs = [np.zeros((0, layout.n))], [np.zeros(0)], [np.zeros(0)]
-        cons = [c for c in self.constraints.values() if c.state != "inactive"]
-        cons.append(self.contact_constraint)  # contacts are physical: always enforced
-        for c in cons:
-            C, lb, ub = c.rows(robot, layout)
-            Cs.append(C)
-            lbs.append(lb)
-            ubs.append(ub)
-        tasks = []
+        bounds = self._rate_bounds(robot.dt) if rate else None
+        live = []
         for task in self.tasks.values():
             if task.state == "inactive":
                 continue
             w = task.row_weight_vector()
-            if not w.any():  # w >= 0: no row counts
-                continue
-            E, f = task.rows(robot, layout)
-            tasks.append((task.level, E, f, w))
-        return dyn, (np.vstack(Cs), np.concatenate(lbs), np.concatenate(ubs)), tasks
+            if w.any():  # w >= 0: a task whose rows all have weight 0 counts for nothing
+                live.append((task, w))
+        cons = [c for c in self.constraints.values() if c.state != "inactive"]
+        counts = tuple(c.count(robot, layout) for c in cons)
+        cc = self.contact_constraint
+        cost = self.contact_cost.contacts(layout, self.contact_states)
+        rate_keep = self._rate_keep if bounds is not None else None
+        key = (
+            layout,
+            tuple((t, t.level) for t, _ in live),
+            tuple(cons),
+            counts,
+            cc.structure(layout),
+            tuple(cost),
+            None if rate_keep is None else len(rate_keep),
+        )
+        asm = self._assembly
+        first = asm is None or asm.key != key
+        # the rows before the rate rows keep their places when only those change
+        self._keep_rows = 0
+        if first and asm is not None and asm.key[:-1] == key[:-1]:
+            self._keep_rows = asm.mc - (asm.key[-1] or 0)
+        if first:
+            asm = self._assembly = _Assembly(
+                key, layout, robot, live, cons, counts, cc.count(robot, layout), cost, rate_keep
+            )
+        A = asm.A
+        np.copyto(asm.A_a, robot.M)
+        for c in layout.contacts:
+            np.negative(robot.contact_jacobian(c).T, out=A[:, layout.f[c.key]])
+        np.negative(robot.b, out=asm.c)
+        for (task, w), (E, f, wv) in zip(live, asm.task_rows, strict=True):
+            task.write(robot, layout, E, f, first)
+            np.copyto(wv, w)
+        for con, (C, lo, hi) in zip(cons, asm.con_rows, strict=True):
+            con.write(robot, layout, C, lo, hi, first)
+        C, lo, hi = asm.contact_rows
+        cc.write(robot, layout, C, lo, hi, first)
+        if cost:
+            E, _f, wv = asm.cost_rows
+            self.contact_cost.write(robot, layout, cost, E, wv)
+        if rate_keep is not None:
+            C, lo, hi = asm.rate_rows
+            if first:
+                C[np.arange(len(rate_keep)), layout.tau.start + rate_keep] = 1.0
+            lo[:] = bounds[0][rate_keep]
+            hi[:] = bounds[1][rate_keep]
+        self._rate_rows = 0 if rate_keep is None else len(rate_keep)
+        return (A, asm.c), (asm.C, asm.lo, asm.hi), asm.tasks
 
-    def solve(self) -> Solution:
-        dyn, cons, tasks = self.problem()
+    def solve(self, rate: bool = False) -> Solution:
+        """Solve at the last :meth:`RobotModel.update` (``rate``: with the torque-rate
+        rows of a transition; if they make it fail, again without them)."""
+        sol = self._solve(rate)
+        if not sol.found and sol.rate_limited and self.strategy == "OneLevelWeighted":
+            sol = self._solve(False)
+        return sol
+
+    def _solve(self, rate: bool) -> Solution:
+        dyn, cons, tasks = self.problem(rate)
+        limited = bool(self._rate_rows)
         self.last_dynamics, self.last_constraints = dyn, cons
         try:
             if self.strategy == "OneLevelWeighted":
@@ -311,15 +501,17 @@ class WholeBodyController:
             chi, ok, reason = None, False, f"solver error: {exc}"
         if ok and not np.all(np.isfinite(chi)):
             ok, reason = False, "non-finite solution"
-        if ok:
-            res = float(np.max(np.abs(dyn[0] @ chi - dyn[1]), initial=0.0))
-            return self._split(chi, True, "", res)
-        return self._fallback(reason)
+        sol = self._split(chi, True, "", dyn) if ok else self._fallback(reason)
+        sol.rate_limited = limited
+        return sol
 
-    def _split(self, chi: np.ndarray, found: bool, reason: str, res: float) -> Solution:
+    def _split(self, chi: np.ndarray, found: bool, reason: str, dyn) -> Solution:
+        """The Solution of ``chi`` (its blocks are views) and its residual in ``dyn``."""
         L = self.layout
+        A, c = dyn
+        res = float(np.abs(A @ chi - c).max()) if len(c) else 0.0
         return Solution(
-            chi, chi[L.a].copy(), chi[L.tau].copy(), chi[L.nv + L.na :].copy(), found, reason, res
+            chi, chi[: L.nv], chi[L.nv : L.nv + L.na], chi[L.nv + L.na :], found, reason, res
         )
 
     def _fallback(self, reason: str) -> Solution:
@@ -335,8 +527,7 @@ class WholeBodyController:
             if self.last_dynamics is not None
             else (np.zeros((0, L.n)), np.zeros(0))
         )
-        res = float(np.max(np.abs(A @ chi - c), initial=0.0))
-        return self._split(chi, False, reason, res)
+        return self._split(chi, False, reason, (A, c))
 
     # -- strategies -----------------------------------------------------------------------------
     def _weighted(self, dyn, cons, tasks) -> tuple[np.ndarray | None, bool, str]:
@@ -346,7 +537,14 @@ class WholeBodyController:
         the previous tick's active set tried first, DAQP otherwise. The answer is
         checked against the constraints over ``chi`` before it is used."""
         qp = self.weighted_qp
-        x, reason = qp.solve(self.layout, dyn, cons, tasks, self.regularisation)
+        asm = self._assembly
+        if asm is not None and asm.tasks is tasks:  # the stacked rows of problem()
+            x, reason = qp.solve_rows(
+                self.layout, *dyn, asm.E, asm.f, asm.w, *cons, self.regularisation, asm.data,
+                self._keep_rows,
+            )  # fmt: skip
+        else:
+            x, reason = qp.solve(self.layout, dyn, cons, tasks, self.regularisation)
         if x is None:
             return None, False, reason
         if qp.last_method == "guess":
@@ -378,10 +576,67 @@ class WholeBodyController:
         ):
             return None, False, "a constraint has lower > upper (infeasible bounds)"
         levels: list[tuple] = [hard]
-        for lvl in sorted({t[0] for t in tasks}):
+        nr = self._rate_rows
+        if nr:  # the torque-rate rows of a transition: a level of their own, after the hard
+            C, lo, hi = cons  # one (their least violation if they cannot be met)
+            m = hard[0].shape[0] - nr
+            levels = [
+                (hard[0][:m], hard[1][:m], hard[2][:m]),
+                (C[-nr:], lo[-nr:], hi[-nr:]),
+            ]
+        order = [*sorted({t[0] for t in tasks if t[0] >= 0}), -1]  # -1: the contact cost
+        for lvl in order:
             rows = [(E * np.sqrt(w)[:, None], f * np.sqrt(w)) for (k, E, f, w) in tasks if k == lvl]
+            if not rows:
+                continue
             levels.append((np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
         res = self.hierarchy.solve(levels)
         if not res.feasible:
             return None, False, f"the constraints cannot be met (violation {res.residuals[0]:.3g})"
         return np.asarray(res.x, dtype=float), True, ""
+
+
+class _Assembly:
+    """The buffers of one structure of the problem (which tasks, constraints, contact
+    states, cost and rate rows): the dynamics ``A`` (``n`` columns; its torque block
+    ``-S^T`` written once), the stacked task rows ``E, f, w`` and constraint rows ``C,
+    lo, hi``, all views of one flat array ``data`` (the compiled QP kernel's input,
+    :func:`._kernels.data_layout`), and each object's views into them."""
+
+    def __init__(self, key, layout, robot, live, cons, counts, ncontact, cost, rate_keep):
+        self.key = key
+        n, nv = layout.n, layout.nv
+        sizes = [t.size for t, _ in live]
+        ncost = sum(2 if c.dim == 3 else 5 for c in cost)
+        m = sum(sizes) + ncost
+        nrate = 0 if rate_keep is None else len(rate_keep)
+        mc = sum(counts) + ncontact + nrate
+        self.m, self.mc = m, mc
+        self.data = np.zeros(data_layout(nv, layout.na, n, m, mc)["size"][0])
+        v = packed_views(self.data, nv, layout.na, n, m, mc)
+        self.A, self.c, self.E, self.f, self.w = v["A"], v["c"], v["E"], v["f"], v["w"]
+        self.C, self.lo, self.hi = v["C"], v["lo"], v["hi"]
+        self.A[:, layout.tau] = robot.minus_St
+        self.A_a = self.A[:, layout.a]
+        self.task_rows, self.tasks = [], []
+        r = 0
+        for (task, _w), k in zip(live, sizes, strict=True):
+            rows = (self.E[r : r + k], self.f[r : r + k], self.w[r : r + k])
+            self.task_rows.append(rows)
+            self.tasks.append((task.level, *rows))
+            r += k
+        if ncost:
+            self.cost_rows = (self.E[r:], self.f[r:], self.w[r:])
+            self.tasks.append((-1, *self.cost_rows))
+        self.con_rows = []
+        r = 0
+        for k in counts:
+            self.con_rows.append((self.C[r : r + k], self.lo[r : r + k], self.hi[r : r + k]))
+            r += k
+        self.contact_rows = (
+            self.C[r : r + ncontact],
+            self.lo[r : r + ncontact],
+            self.hi[r : r + ncontact],
+        )
+        r += ncontact
+        self.rate_rows = (self.C[r:], self.lo[r:], self.hi[r:])

@@ -6,8 +6,9 @@ A task gives ``E`` (m x n) and ``f`` (m) and contributes, in its level,
           W = \mathrm{diag}(r \; w \; w_i \; s_i)
 
 with ``w`` the task weight (>= 0), ``w_i`` the per-row weights (>= 0, default 1),
-``s_i`` the selection (0 or 1 per row: a 0 drops the row) and ``r`` the activation ramp
-(see :mod:`.activation`). ``desired`` is the target (size m, set by the user or a servo).
+``s_i`` the selection (0 or 1 per row: a 0 drops the row) and ``r`` the activation
+ramp's weight factor (``ramp_weight`` of the ramp, see :mod:`.activation`). ``desired``
+is the target (size m, set by the user or a servo).
 
 =========================  ====  =========================================================
 task                       m     rows
@@ -22,6 +23,10 @@ WrenchTask                 6/3   ``f_c = w_des`` (contact wrench, LOCAL, N and N
 TorqueTask                 na    ``tau = tau_des`` (N m)
 RegularisationTask         n     ``chi = 0`` (global regularisation, default weight 1e-5)
 =========================  ====  =========================================================
+
+The controller adds the **contact wrench distribution cost** (:class:`ContactWrenchCost`)
+of its contacts by default: it keeps each contact's wrench away from the edges of its
+friction and CoP polyhedron, where a real contact starts to slide or tilt.
 """
 
 from __future__ import annotations
@@ -31,12 +36,13 @@ import math
 import numpy as np
 
 from ...errors import SotpyError
-from .activation import Activatable
-from .model import Layout, RobotModel
+from .activation import Activatable, ramp_weight
+from .model import ContactSpec, Layout, RobotModel
 
 __all__ = [
     "CartesianAccelerationTask",
     "CoMAccelerationTask",
+    "ContactWrenchCost",
     "JointAccelerationTask",
     "RegularisationTask",
     "Task",
@@ -67,6 +73,7 @@ class Task(Activatable):
         self.selection = np.ones(size)
         self.setLevel(level)
         self.desired = np.zeros(size)
+        self._w_cache: tuple | None = None
 
     def setWeight(self, weight: float) -> None:
         """Task weight ``w`` (finite, >= 0)."""
@@ -103,11 +110,30 @@ class Task(Activatable):
         self.desired = d.copy()
 
     def row_weight_vector(self) -> np.ndarray:
-        """``diag(W)``: ramp * weight * row weights * selection."""
-        return self.ramp * self.weight * self.row_weights * self.selection
+        """``diag(W)``: ramp_weight(ramp) * weight * row weights * selection (the ramp's
+        shape: :func:`.activation.ramp_weight`); do not modify the array returned (it
+        is kept until the ramp or a weight changes through the setters)."""
+        key = (self.ramp, self.weight, id(self.row_weights), id(self.selection))
+        cached = self._w_cache
+        if cached is None or cached[0] != key:
+            w = ramp_weight(self.ramp) * self.weight * self.row_weights * self.selection
+            cached = self._w_cache = (key, w)
+        return cached[1]
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        """``(E, f)`` at the robot's current state."""
+        """``(E, f)`` at the robot's current state (fresh arrays; by :meth:`write`)."""
+        E = np.zeros((self.size, layout.n))
+        f = np.zeros(self.size)
+        self.write(robot, layout, E, f, True)
+        return E, f
+
+    def write(
+        self, robot: RobotModel, layout: Layout, E: np.ndarray, f: np.ndarray, first: bool
+    ) -> None:
+        """Write the rows at the robot's current state into ``E`` (m x n, a view of the
+        problem's buffer) and ``f`` (m). ``first``: the buffer is new (zero); otherwise
+        it holds what this task wrote at the previous tick, so constant entries need not
+        be written again. A subclass overrides :meth:`write` or :meth:`rows`."""
         raise NotImplementedError
 
     def bind(self, robot: RobotModel, layout: Layout) -> None:
@@ -125,10 +151,9 @@ class CartesianAccelerationTask(Task):
     def bind(self, robot: RobotModel, layout: Layout) -> None:
         self.fid = robot.frame_id(self.frame, self.name)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        E = np.zeros((6, layout.n))
+    def write(self, robot, layout, E, f, first) -> None:
         E[:, layout.a] = robot.frame_jacobian(self.fid)
-        return E, self.desired - robot.frame_drift(self.fid)
+        np.subtract(self.desired, robot.frame_drift(self.fid), out=f)
 
 
 class JointAccelerationTask(Task):
@@ -137,10 +162,10 @@ class JointAccelerationTask(Task):
     def __init__(self, name: str, na: int, weight: float = 1.0, level: int = 0) -> None:
         super().__init__(name, na, weight, level)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        E = np.zeros((layout.na, layout.n))
-        E[:, layout.a] = robot.S
-        return E, self.desired.copy()
+    def write(self, robot, layout, E, f, first) -> None:
+        if first:
+            E[:, layout.a] = robot.S
+        f[:] = self.desired
 
 
 class CoMAccelerationTask(Task):
@@ -149,10 +174,9 @@ class CoMAccelerationTask(Task):
     def __init__(self, name: str, weight: float = 1.0, level: int = 0) -> None:
         super().__init__(name, 3, weight, level)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        E = np.zeros((3, layout.n))
+    def write(self, robot, layout, E, f, first) -> None:
         E[:, layout.a] = robot.Jcom
-        return E, self.desired - robot.com_drift
+        np.subtract(self.desired, robot.com_drift, out=f)
 
 
 class WrenchTask(Task):
@@ -174,11 +198,11 @@ class WrenchTask(Task):
                 f"{self.name}: the contact at {self.frame!r} does not have dimension {self.size}"
             )
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        E = np.zeros((self.size, layout.n))
-        sl = layout.f[self.frame]
-        E[np.arange(self.size), np.arange(sl.start, sl.stop)] = 1.0
-        return E, self.desired.copy()
+    def write(self, robot, layout, E, f, first) -> None:
+        if first:
+            sl = layout.f[self.frame]
+            E[np.arange(self.size), np.arange(sl.start, sl.stop)] = 1.0
+        f[:] = self.desired
 
 
 class TorqueTask(Task):
@@ -187,10 +211,10 @@ class TorqueTask(Task):
     def __init__(self, name: str, na: int, weight: float = 1.0, level: int = 0) -> None:
         super().__init__(name, na, weight, level)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        E = np.zeros((layout.na, layout.n))
-        E[np.arange(layout.na), np.arange(layout.tau.start, layout.tau.stop)] = 1.0
-        return E, self.desired.copy()
+    def write(self, robot, layout, E, f, first) -> None:
+        if first:
+            E[np.arange(layout.na), np.arange(layout.tau.start, layout.tau.stop)] = 1.0
+        f[:] = self.desired
 
 
 class RegularisationTask(Task):
@@ -199,9 +223,122 @@ class RegularisationTask(Task):
     def __init__(self, name: str, n: int, weight: float = 1e-5, level: int = 0) -> None:
         super().__init__(name, n, weight, level)
 
-    def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
-        return np.eye(layout.n), self.desired.copy()
+    def write(self, robot, layout, E, f, first) -> None:
+        if first:
+            E[:] = np.eye(layout.n)
+        f[:] = self.desired
 
 
 def _finite(x: float) -> bool:
     return math.isfinite(x)
+
+
+class ContactWrenchCost:
+    r"""The default distribution of the contact wrenches: each unilateral contact's CoP
+    pulled to its sole's centre, its tangential force and twisting torque to zero,
+    relative to its own normal force, so that the optimum stays inside the friction and
+    CoP polyhedron instead of on its edge (where a least-norm split puts a lightly
+    loaded contact).
+
+    The rows approximate the squared ratios that measure how close a contact is to
+    sliding or tilting: for a 6-D contact (LOCAL wrench ``(f, tau)``, sole centre
+    ``(o_x, o_y)``, half-sizes ``(X, Y)`` of its CoP rectangle, friction ``mu``), with
+    ``F`` its normal force at the previous solution (at least ``fmin`` and 2 % of the
+    robot's weight; the weight over the number of contacts before a first solution),
+    the rows (dimensionless, target 0) are::
+
+        (tau_y + o_x f_z) / (X F),  (tau_x - o_y f_z) / (Y F)   ~ (CoP - centre) / half-size
+        f_x / (mu F),  f_y / (mu F)                              ~ f_t / (mu f_z)
+        tau_z / (mu min(X, Y) F)                                 ~ torsion / its bound
+
+    (at ``f_z = F`` each is the ratio itself); a point contact has the two tangential
+    rows. Scaling by the contact's own load is what keeps a light contact centred: with
+    one scale for every contact, the least-squares split of a tangential force is equal
+    between the feet, which saturates the friction of the light one. ``weight`` (>= 0;
+    0: no cost) is the weight of every row; the rows of a contact that is not inactive
+    are included (their wrench ramps down while it deactivates: the rows are linear in
+    it). In the multi-level strategy the cost is part of the last level.
+    """
+
+    def __init__(self, weight: float = 0.1) -> None:
+        self.setWeight(weight)
+        self.loads: dict[str, float] = {}  # contact key -> F (N), from the last solution
+        self._unit: dict[ContactSpec, np.ndarray] = {}  # the rows for F = 1 N
+
+    def setWeight(self, weight: float) -> None:
+        w = float(weight)
+        if not (math.isfinite(w) and w >= 0):
+            raise SotpyError(f"contact wrench cost: the weight must be finite and >= 0, got {w}")
+        self.weight = w
+
+    @staticmethod
+    def contact_rows(c: ContactSpec, F: float) -> np.ndarray:
+        """The cost's rows on the contact's wrench (k x dim), for the load ``F`` (N)."""
+        if c.dim == 3:
+            return np.array([[1.0, 0, 0], [0, 1.0, 0]]) / (c.mu * F)
+        ox, oy = c.offset
+        X, Y = c.half_sizes
+        G = np.zeros((5, 6))
+        G[0, 4], G[0, 2] = 1.0 / (X * F), ox / (X * F)
+        G[1, 3], G[1, 2] = 1.0 / (Y * F), -oy / (Y * F)
+        G[2, 0] = G[3, 1] = 1.0 / (c.mu * F)
+        G[4, 5] = 1.0 / (c.mu * min(X, Y) * F)
+        return G
+
+    def load(self, c: ContactSpec, weight: float, count: int) -> float:
+        """``F`` of contact ``c`` (N): see the class doc."""
+        F = self.loads.get(c.key)
+        if F is None:
+            F = weight / max(count, 1)
+        return max(F, c.fmin, 0.02 * weight)
+
+    def observe(self, layout: Layout, f: np.ndarray) -> None:
+        """Record the normal forces of a solution's wrenches ``f`` (every contact's,
+        layout order) as the next tick's loads."""
+        i = 0
+        loads = {}
+        for c in layout.contacts:
+            if not c.bilateral:
+                loads[c.key] = float(f[i + 2])
+            i += c.dim
+        self.loads = loads
+
+    def contacts(self, layout: Layout, states: dict) -> list[ContactSpec]:
+        """The contacts the cost has rows for (unilateral, not inactive; none if the
+        weight is 0)."""
+        if self.weight <= 0:
+            return []
+        out = []
+        for c in layout.contacts:
+            st = states.get(c.key)
+            if not c.bilateral and (st is None or st.state != "inactive"):
+                out.append(c)
+        return out
+
+    def write(
+        self, robot: RobotModel, layout: Layout, contacts: list, E: np.ndarray, w: np.ndarray
+    ) -> None:
+        """The rows of ``contacts`` into ``E`` (a view of the problem's buffer, zero
+        outside the contacts' wrench columns) and their weights into ``w``; the target
+        is 0."""
+        W = robot.weight
+        count = sum(1 for c in layout.contacts if not c.bilateral)
+        r = 0
+        for c in contacts:
+            G = self._unit.get(c)
+            if G is None:
+                G = self._unit[c] = self.contact_rows(c, 1.0)
+            k = len(G)
+            np.multiply(G, 1.0 / self.load(c, W, count), out=E[r : r + k, layout.f[c.key]])
+            r += k
+        w[:] = self.weight
+
+    def rows(
+        self, robot: RobotModel, layout: Layout, states: dict
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(E, f, w)`` over ``chi`` (fresh arrays; no rows: an empty E)."""
+        contacts = self.contacts(layout, states)
+        m = sum(2 if c.dim == 3 else 5 for c in contacts)
+        E, f, w = np.zeros((m, layout.n)), np.zeros(m), np.zeros(m)
+        self.write(robot, layout, contacts, E, w)
+        return E, f, w
