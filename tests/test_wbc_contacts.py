@@ -17,10 +17,12 @@ from sotpy.solvers.wbc import (
     CartesianAccelerationTask,
     CoMAccelerationTask,
     ContactSpec,
+    JointAccelerationTask,
     JointPositionLimit,
     JointTorqueLimit,
     WholeBodyController,
     WrenchTask,
+    friction_rows,
     wrench_pi,
 )
 
@@ -296,3 +298,145 @@ def test_position_limit_holds_at_the_next_tick():
     assert np.all(step <= model.upperPositionLimit + 1e-12)
     assert np.all(step >= model.lowerPositionLimit - 1e-12)
     assert np.all(q + 0.05 * v + 0.5 * 0.05**2 * sol.a <= model.upperPositionLimit + 1e-9)
+
+
+# -- the contacts that keep a foot on a floor ---------------------------------------------
+@pytest.mark.parametrize("facets,loss", [(4, 1 - np.sqrt(0.5)), (8, 1 - np.cos(np.pi / 8))])
+def test_friction_pyramid_facets_by_linear_programming(facets, loss):
+    """The largest tangential force the pyramid allows in each direction (an LP, not the
+    rows' formula): mu at its edges, ``mu cos(pi/n)`` at worst, never beyond the cone."""
+    from scipy.optimize import linprog
+
+    c = ContactSpec("left_sole_link", 3, 0.6, facets=facets)
+    G, h = friction_rows(c)
+    best = []
+    for theta in np.linspace(0.0, 2 * np.pi, 721):  # every 0.5 deg: the edges included
+        d = np.array([np.cos(theta), np.sin(theta)])
+        # max d . f_t subject to G f <= h and f_z = 1
+        res = linprog(
+            -np.r_[d, 0.0], A_ub=G, b_ub=h, A_eq=[[0, 0, 1]], b_eq=[1.0], bounds=[(None, None)] * 3
+        )
+        assert res.status == 0
+        best.append(-res.fun)
+    best = np.array(best) / c.mu
+    assert best.max() == pytest.approx(1.0, abs=1e-9)  # inscribed: its edges on the cone
+    assert best.min() == pytest.approx(1.0 - loss, abs=1e-6)
+
+
+def test_cop_margin_and_contact_settings_are_checked(talos):
+    from scipy.optimize import linprog
+
+    c = ContactSpec("left_sole_link", 6, 0.5, 0.205, 0.122, (-0.005, 0.0), margin=0.01)
+    G, h = friction_rows(c)
+    for sign, axis in ((1, 4), (-1, 4), (1, 3), (-1, 3)):  # extreme CoPs, f_z = 1
+        obj = np.zeros(6)
+        obj[axis] = -sign
+        res = linprog(obj, A_ub=G, b_ub=h, A_eq=[[0, 0, 1, 0, 0, 0]], b_eq=[1.0],
+                      bounds=[(None, None)] * 6)  # fmt: skip
+        tau = res.x[axis]  # CoP x = -tau_y / f_z (from the centre at -5 mm), y = tau_x / f_z
+        if axis == 4:
+            assert abs(-tau + 0.005) == pytest.approx(0.205 / 2 - 0.01)
+        else:
+            assert abs(tau) == pytest.approx(0.122 / 2 - 0.01)
+    w = WholeBodyController(talos.model)
+    for bad, what in (
+        (dict(margin=0.07), "margin"),
+        (dict(facets=2), "facets"),
+        (dict(facets=4.5), "facets"),
+        (dict(kp=-1.0), "gains"),
+        (dict(kd=float("nan")), "gains"),
+    ):
+        with pytest.raises(SotpyError, match=what):
+            w.setContacts([ContactSpec("left_sole_link", 6, 0.5, 0.205, 0.122, **bad)])
+    assert w.contacts == []
+
+
+def test_contact_feedback_asks_the_foot_back_to_its_reference(talos):
+    """With gains, the contact row asks the foot's LOCAL spatial acceleration to be
+    ``-kp e - kd nu``: checked with Pinocchio's own acceleration of the frame at the
+    solution, the foot moved 2 mm and 5 mrad off its reference and moving."""
+    model = talos.model
+    kp, kd = 100.0, 15.0
+    w = WholeBodyController(model)
+    w.setContacts([ContactSpec(f, 6, 0.5, 0.205, 0.122, (-0.005, 0.0), kp=kp, kd=kd) for f in FEET])
+    w.addTask(CoMAccelerationTask("com", 1.0)).activate()
+    w.setTorqueRateLimit(np.inf)
+    q = talos.q0.copy()
+    w.update(q, np.zeros(model.nv))  # the references: the feet where they are
+    rng = np.random.default_rng(2)
+    dq = np.zeros(model.nv)
+    dq[6:] = rng.normal(size=model.nv - 6) * 2e-3
+    q2 = pin.integrate(model, q, dq)
+    v = rng.normal(size=model.nv) * 0.05
+    sol = w.update(q2, v)
+    assert sol.found
+    data = model.createData()
+    pin.forwardKinematics(model, data, q2, v, sol.a)
+    pin.updateFramePlacements(model, data)
+    for f in FEET:
+        fid = model.getFrameId(f)
+        ref = w.contact_states[f].reference
+        e = pin.log6(ref.actInv(data.oMf[fid])).vector
+        nu = pin.getFrameVelocity(model, data, fid, pin.LOCAL).vector
+        acc = pin.getFrameAcceleration(model, data, fid, pin.LOCAL).vector
+        assert np.abs(e).max() > 1e-3  # off its reference
+        assert np.allclose(acc, -kp * e - kd * nu, atol=1e-7)
+    # activating a contact anew takes its reference where the foot is then
+    w.deactivate(FEET[0])
+    while w.contact_states[FEET[0]].state != "inactive":
+        w.update(q2, v)
+    w.activate(FEET[0])
+    w.update(q2, v)
+    data2 = model.createData()
+    pin.framesForwardKinematics(model, data2, q2)
+    assert w.contact_states[FEET[0]].reference.isApprox(data2.oMf[model.getFrameId(FEET[0])])
+
+
+def test_wrench_cost_keeps_a_light_foot_centred(talos):
+    """The CoM accelerated to the right (the ZMP goes left, over the left foot), 40 N
+    left on the right foot: without the cost,
+    the least-norm split puts the light foot on the edges of its polyhedron (friction and
+    CoP at their bounds); with it, the light foot's wrench is centred."""
+
+    def solve(weight):
+        w = WholeBodyController(talos.model)
+        w.setContacts(
+            [ContactSpec(f, 6, 0.5, 0.205, 0.122, (-0.005, 0.0), 40.0, 0.01) for f in FEET]
+        )
+        w.setContactCostWeight(weight)
+        w.setTorqueRateLimit(np.inf)  # one state, solved again: no transition to slow it
+        w.addTask(CoMAccelerationTask("com", 10.0)).setDesired([0.0, -1.0, 0.0])
+        w.addTask(JointAccelerationTask("post", w.robot.na, 1e-2))
+        w.activateTasksAndConstraints()
+        q, v = talos.q0.copy(), np.zeros(talos.model.nv)
+        for _ in range(3):  # the cost's loads come from the previous solution
+            sol = w.update(q, v)
+        assert sol.found
+        return sol.f.reshape(2, 6)
+
+    def utilisation(f):  # |f_t| / (mu cos(pi/8) f_z) and |CoP| / half-size, per foot
+        fz = f[:, 2]
+        fric = np.hypot(f[:, 0], f[:, 1]) / (0.5 * np.cos(np.pi / 8) * fz)
+        cop = np.maximum(np.abs(-f[:, 4] / fz + 0.005) / 0.0925, np.abs(f[:, 3] / fz) / 0.051)
+        return fric, cop
+
+    bare, cost = solve(0.0), solve(0.1)
+    light = int(np.argmin(cost[:, 2]))
+    assert cost[light, 2] == pytest.approx(40.0, rel=1e-6)
+    fric0, cop0 = utilisation(bare)
+    fric1, cop1 = utilisation(cost)
+    assert max(fric0[light], cop0[light]) > 0.99  # on an edge
+    assert fric1[light] < 0.05 and cop1[light] < 0.05  # centred
+
+
+def test_wrench_cost_rows_are_the_ratios_at_their_load():
+    from sotpy.solvers.wbc import ContactWrenchCost
+
+    c = ContactSpec("left_sole_link", 6, 0.7, 0.2, 0.1, (0.01, -0.02), margin=0.005)
+    F = 300.0
+    f = np.array([20.0, -15.0, F, 4.0, -6.0, 1.5])  # a wrench with f_z = F
+    r = ContactWrenchCost.contact_rows(c, F) @ f
+    X, Y = 0.1 - 0.005, 0.05 - 0.005
+    cop = np.array([-f[4] / f[2], f[3] / f[2]])
+    assert np.allclose(r[:2], [-(cop[0] - 0.01) / X, (cop[1] + 0.02) / Y])
+    assert np.allclose(r[2:4], f[:2] / (0.7 * F)) and np.isclose(r[4], f[5] / (0.7 * Y * F))

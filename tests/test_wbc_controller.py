@@ -141,3 +141,52 @@ def test_cli_demo_panda_torque(tmp_path, capsys):
     assert png.stat().st_size > 10_000
     assert main(["demo", "panda-torque", "--strategy", "Nope"]) == 2  # usage error
     assert "invalid choice: 'Nope'" in capsys.readouterr().err
+
+
+def test_pid_servos_against_a_hand_rolled_loop():
+    """JointPidServo / ComPidServo / PosePidServo: the PD plus ``-Ki I``, ``I`` the error
+    integrated once per tick and clamped per axis (anti-windup), reset on demand."""
+    from sotpy.graph.pool import pool
+    from sotpy.solvers.controller import ComPidServo, JointPidServo, PosePidServo
+
+    dt, kp, ki, lim = 0.002, 9.0, 30.0, 0.004
+    s = JointPidServo("jpid")
+    s.dt.value = dt
+    s.Kp.value = [kp]
+    s.Ki.value = [ki]
+    s.integralLimit.value = [lim]
+    s.reference.value = np.zeros(2)
+    s.velocity.value = np.zeros(2)
+    integral = np.zeros(2)
+    for k in range(40):
+        x = np.array([0.1, -0.02 * k])  # a constant error and a growing one
+        s.position.value = x
+        integral = np.clip(integral + x * dt, -lim, lim)
+        expected = -kp * x - 2 * np.sqrt(kp) * 0.0 - ki * integral
+        pool.time = k
+        assert np.allclose(s.desiredAcceleration(k), expected), k
+    assert np.allclose(s.getIntegral(), integral) and np.all(np.abs(integral) == lim)  # wound up
+    s.resetIntegral()
+    pool.time = 40
+    s.position.value = np.array([0.1, 0.0])
+    assert np.allclose(
+        s.desiredAcceleration(40), -kp * np.array([0.1, 0.0]) - ki * dt * np.array([0.1, 0.0])
+    )
+    c = ComPidServo("cpid")
+    assert c.className == "ComPidServo" and c.hasSignal("integralLimit")
+    p = PosePidServo("ppid")
+    p.dt.value = dt
+    p.Ki.value = np.full(6, ki)
+    M = pin.SE3(pin.exp3(np.array([0.0, 0.0, 0.1])), np.array([0.01, 0.0, 0.0]))
+    p.position.value = M
+    p.reference.value = pin.SE3.Identity()
+    p.velocity.value = np.zeros(6)
+    e = np.concatenate([M.translation, pin.log3(M.rotation)])
+    pool.time = 41
+    assert np.allclose(p.desiredAcceleration(41), -100.0 * e - ki * e * dt)  # default Kp 100
+    for bad in (("Ki", [-1.0]), ("integralLimit", [-1.0]), ("dt", 0.0)):
+        q = JointPidServo(f"bad_{bad[0]}")
+        q.position.value, q.velocity.value, q.reference.value = [0.1], [0.0], [0.0]
+        q.signal(bad[0]).value = bad[1]
+        with pytest.raises(SotpyError, match=bad[0]):
+            _ = q.desiredAcceleration.value

@@ -13,69 +13,94 @@ import pytest
 from sotpy.demos.torque import run_callbacks, run_talos_torque
 
 SOLE = (0.205, 0.122, (-0.005, 0.0))  # Talos' soles (docs/robots.md): length, width, centre
-MU = 0.5
-MARGIN = 0.01
+MU = 0.5  # the controller's friction coefficient (the floor's: Floor().friction, 0.8)
+MARGIN = 0.01  # the controller's CoP margin (m)
+RATE_TIME = 0.1  # the documented torque rate bound: effort limit per 0.1 s (torque-control.md)
 
 
 def _sole_centre(frame: str) -> np.ndarray:
+    """The sole's centre in half-sitting with the ankle rolls at 0 (the demo's start)."""
     r = erd.load("talos")
+    q = r.q0.copy()
+    for j in ("leg_left_6_joint", "leg_right_6_joint"):
+        q[r.model.joints[r.model.getJointId(j)].idx_q] = 0.0
     data = r.model.createData()
-    pin.framesForwardKinematics(r.model, data, r.q0)
+    pin.framesForwardKinematics(r.model, data, q)
     return data.oMf[r.model.getFrameId(frame)].act(np.array([*SOLE[2], 0.0]))
 
 
-def _check_talos(out: dict, side: str) -> None:
+def _check_talos(out: dict, side: str, floor: bool = True) -> None:
+    """The issue's checks, recomputed here from the run's raw arrays: the sole
+    placements (Pinocchio, from the device's state), the simulator's own contact
+    wrenches and corner forces, the torques sent, the model's effort limits."""
     assert out["solution_found"]
-    # the feet are welded in the simulation; what moves them is the device's first-order
-    # integration (corrected by its Baumgarte terms), measured ~1e-6 m and ~2e-6 rad
-    assert out["feet_drift"] < 1e-5
-    assert out["feet_rotation"] < 1e-5
-    # the simulated contact wrenches (sole frames), checked here from the raw arrays
-    w = out["wrenches"]
+    motion = out["sole_motion"]  # per tick and sole: dx, dy, dz (m), rotation (rad)
+    assert np.hypot(motion[:, :, 0], motion[:, :, 1]).max() <= 1e-3  # slides <= 1 mm
+    assert motion[:, :, 3].max() <= 0.01  # tilts <= 0.01 rad
+    w = out["wrenches"]  # the simulator's, in the sole frames
     fz = w[:, :, 2]
-    assert np.all(fz > 0.0)  # unilateral: the soles push, never pull
-    assert np.all(np.hypot(w[:, :, 0], w[:, :, 1]) <= MU * fz * (1 + 1e-9))  # cone
+    assert np.all(fz > 0.0)  # every contact pushes, at every tick
+    if floor:
+        assert np.all(out["corner_fz"] > 0.0)  # no corner of a sole lifts
+    assert np.all(np.hypot(w[:, :, 0], w[:, :, 1]) <= MU * fz)  # inside the cones
     length, width, off = SOLE
     cop_x = -w[:, :, 4] / fz - off[0]
     cop_y = w[:, :, 3] / fz - off[1]
-    # the controller keeps the CoP MARGIN inside the sole; the simulated wrenches agree
-    # with the controller's to max_wrench_mismatch (< 1e-2 N), so within 1e-6 m of it
-    assert np.all(np.abs(cop_x) <= length / 2 - MARGIN + 1e-6)
-    assert np.all(np.abs(cop_y) <= width / 2 - MARGIN + 1e-6)
-    assert np.all(np.abs(w[:, :, 5]) <= MU * (min(length, width) / 2) * fz)  # torsion
-    assert out["max_wrench_mismatch"] < 1e-2
-    # the CoM is over the foot: its goal is the sole centre, and it got there
+    margin = np.minimum(length / 2 - np.abs(cop_x), width / 2 - np.abs(cop_y))
+    assert margin.min() >= MARGIN / 2  # the CoP inside the sole with margin
+    # torque steps during the hand task's activation ramp, against the documented bound
+    k0, k1 = out["ramp_ticks"]
+    model = erd.load("talos").model
+    bound = model.effortLimit[6:] / RATE_TIME * (out["times"][1] - out["times"][0])
+    steps = np.abs(np.diff(out["torques"][k0 - 1 : k1 + 1], axis=0))
+    assert np.all(steps <= bound * (1 + 1e-9))
+    assert np.all(np.abs(out["torques"]) <= model.effortLimit[6:] * (1 + 1e-9))
+    # CoM and hand track their references within 1 mm, and end on their goals
+    com_err = np.linalg.norm(out["com"][:, :2] - out["com_ref"][:, :2], axis=1)
+    assert com_err.max() <= 1e-3 and com_err[-1] <= 1e-3
+    hand_err = np.linalg.norm(out["hand"] - out["hand_ref"], axis=1)
+    assert np.nanmax(hand_err[k1:]) <= 1e-3 and out["hand_error"] <= 1e-3
+    assert abs(out["com"][-1, 2] - out["com"][0, 2]) < 5e-3  # height kept
+    # the CoM went over the stance sole's centre, and the weight with it
     centre = _sole_centre(f"{side}_sole_link")
     assert np.allclose(out["com_goal"][:2], centre[:2], atol=1e-9)
-    assert np.linalg.norm(out["com"][-1, :2] - centre[:2]) < 2e-3
-    assert abs(out["com"][-1, 2] - out["com"][0, 2]) < 5e-3  # height kept
-    assert out["hand_error"] < 2e-3
-    assert out["max_torque_ratio"] <= 1.0
+    i = 0 if side == "left" else 1
+    reach = slice(k1, k1 + 500)
+    assert np.linalg.norm(out["com"][reach, :2] - centre[:2], axis=1).max() < 2e-3
+    assert np.all(fz[reach, i] / fz[reach].sum(axis=1) > 0.9)
+    assert out["ok"]
 
 
-def test_talos_shifts_com_and_reaches_keeping_its_feet(tmp_path):
-    out = run_talos_torque(duration=1.0, settle=0.4, plot=tmp_path / "talos.png")
+def test_talos_shifts_com_reaches_and_shifts_back_on_a_floor(tmp_path):
+    """The issue's demo on the contact simulator (MuJoCo floor, four corners per sole)."""
+    out = run_talos_torque(plot=tmp_path / "talos.png")
     _check_talos(out, "left")
-    # the weight moved onto the left foot (the rest of the distribution is the
-    # regularisation's least-norm split, bounded by the left CoP on its sole's margin)
-    fz = out["wrenches"][:, :, 2]
-    assert fz[0, 0] / fz[0].sum() < 0.55 and fz[-1, 0] / fz[-1].sum() > 0.65
+    assert out["contacts"] == "floor"
+    # the controller's wrenches are what the floor gave, once the soft floor's forces have
+    # built up from zero penetration (29 N apart at the first tick, 2 N after 20 ms)
+    assert out["wrench_mismatch"][20:].max() < 2.0
     assert (tmp_path / "talos.png").stat().st_size > 10_000
 
 
-# MultiLevelWeighted is left out: with the position-limit rows its hierarchy takes
-# ~170 ms per tick on this demo (to be investigated), see docs/torque-control.md
+def test_talos_welded_feet_remain_an_option():
+    out = run_talos_torque(duration=1.0, settle=0.1, contacts="welded")
+    assert out["contacts"] == "welded" and np.isnan(out["min_point_force"])
+    _check_talos(out, "left", floor=False)
+    assert out["feet_slide"] < 1e-5  # welded: only the integration's drift
+    assert out["max_wrench_mismatch"] < 1e-2
+
+
 @pytest.mark.soak
 @pytest.mark.parametrize(
     "strategy,side,offset",
     [
-        ("OneLevelWeighted", "left", (0.15, 0.1, 0.1)),
-        ("OneLevelWeighted", "right", (0.15, -0.05, 0.1)),
+        ("OneLevelWeighted", "right", (0.15, 0.0, 0.05)),
+        ("MultiLevelWeighted", "left", (0.15, 0.0, 0.05)),
     ],
 )
 def test_talos_soak(strategy, side, offset):
     out = run_talos_torque(
-        duration=3.0, settle=2.0, side=side, hand_offset=offset, strategy=strategy
+        duration=1.5, settle=1.0, side=side, hand_offset=offset, strategy=strategy
     )
     _check_talos(out, side)
 
@@ -145,9 +170,9 @@ def test_cli_demos(tmp_path, capsys):
     assert out[-1].split()[4:6] == ["posture", "onDeactivated"]
     assert not any("onCompute" in line for line in out)
     png = tmp_path / "talos.png"
-    args = ["demo", "talos-torque", "--duration", "1.0", "--settle", "0.2", "--plot", str(png)]
+    args = ["demo", "talos-torque", "--duration", "1.0", "--settle", "0.1", "--plot", str(png)]
     assert main(args) == 0
-    assert "talos-torque OK" in capsys.readouterr().out
+    assert "talos-torque OK (floor)" in capsys.readouterr().out
     assert png.stat().st_size > 10_000
     assert main(["demo", "talos-torque", "--side", "up"]) == 2  # usage error
     assert "invalid choice: 'up'" in capsys.readouterr().err

@@ -9,7 +9,7 @@
                                [--target-offset X Y Z] [--margin M] [--damping L]
     sotpy demo panda-torque [--duration S] [--strategy NAME] [--plot PATH]
     sotpy demo talos-torque [--duration S] [--settle S] [--side left|right]
-                            [--strategy NAME] [--plot PATH]
+                            [--contacts floor|welded] [--strategy NAME] [--plot PATH]
     sotpy demo torque-callbacks [--no-compute]
     sotpy robots
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
@@ -120,8 +120,8 @@ DEMOS["panda-torque"] = (
     torque_run,
 )
 DEMOS["talos-torque"] = (
-    "torque control (ORCA-style): Talos on both feet (friction cones, CoP in the soles) "
-    "shifts its CoM over one foot and reaches with its right hand; --plot",
+    "torque control (ORCA-style): Talos on a floor (friction cones, CoP in the soles) "
+    "shifts its CoM over one foot, reaches with its right hand and shifts back; --plot",
     torque_talos_options,
     torque_talos_run,
 )

@@ -371,12 +371,14 @@ def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
     """The Talos torque demo's run (``sotpy.demos.torque.run_talos_torque``), saved
     as PNG at ``path`` if given; returns the ``matplotlib.figure.Figure``.
 
-    Three axes: each sole's normal and tangential contact force (N, sole frame), each
-    CoP in its sole (mm, sole frame, with the sole's edges as limits), and the CoM's
-    displacement from its start (mm, world) with its goal on each axis.
+    Four axes: each sole's normal and tangential contact force (N, sole frame, the
+    simulator's), each CoP in its sole (mm, sole frame, with the sole's edges and the
+    controller's CoP bound inside its margin as limits), the torques against their
+    limits (the largest ``|tau| / limit`` of each joint group, the limit at 1), and the
+    CoM's displacement from its start (mm, world) with the shift's goal on each axis.
     """
-    fig, axes = _figure(9.0, 9.5, 3, 1, sharex=True)
-    ax_f, ax_cop, ax_com = axes[:, 0]
+    fig, axes = _figure(9.0, 12.0, 4, 1, sharex=True)
+    ax_f, ax_cop, ax_tau, ax_com = axes[:, 0]
     t, w = out["times"], out["wrenches"]
     soles = out.get("soles")
     for i, side in enumerate(("left", "right")):
@@ -385,7 +387,8 @@ def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
             t, np.hypot(w[:, i, 0], w[:, i, 1]), "--", color=f"C{2 * i}", label=f"{side} |f_xy|"
         )
         off = soles[i]["offset"] if soles else (0.0, 0.0)
-        cop_x, cop_y = -w[:, i, 4] / w[:, i, 2] - off[0], w[:, i, 3] / w[:, i, 2] - off[1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cop_x, cop_y = -w[:, i, 4] / w[:, i, 2] - off[0], w[:, i, 3] / w[:, i, 2] - off[1]
         ax_cop.plot(t, 1e3 * cop_x, color=f"C{2 * i}", label=f"{side} CoP x")
         ax_cop.plot(t, 1e3 * cop_y, ":", color=f"C{2 * i}", label=f"{side} CoP y")
     if soles:
@@ -406,10 +409,33 @@ def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
             label=f"sole edges y: ±{500 * width:.0f} mm",
         )
         ax_cop.axhline(-1e3 * width / 2, color="grey", ls="-.", lw=0.9)
+        margin = out.get("sole_margin")
+        if margin:
+            bound = 1e3 * (width / 2 - margin)
+            ax_cop.axhline(
+                bound, color="r", ls=":", lw=0.9, label=f"CoP bound y (margin {1e3 * margin:g} mm)"
+            )
+            ax_cop.axhline(-bound, color="r", ls=":", lw=0.9)
     ax_f.set_ylabel("contact force [N]")
     ax_f.set_title("contact forces (sole frames)")
     ax_cop.set_ylabel("CoP [mm]")
     ax_cop.set_title("centres of pressure in the soles (from each sole's centre)")
+    tau = out.get("torques")
+    limits = out.get("torque_limits")
+    if tau is not None and limits is not None:
+        names = out.get("joint_names") or [f"joint {k}" for k in range(tau.shape[1])]
+        ratio = np.abs(tau) / np.asarray(limits, dtype=float)
+        groups: dict[str, list[int]] = {}
+        for k, name in enumerate(names):
+            group = name.split("_")[0] if "_" in name else name
+            groups.setdefault(group, []).append(k)
+        for j, (group, idx) in enumerate(groups.items()):
+            ax_tau.plot(
+                t, ratio[:, idx].max(axis=1), color=f"C{j}", lw=0.9, label=f"{group} joints"
+            )
+        ax_tau.axhline(1.0, color="k", ls="--", lw=1.0, label="torque limits")
+    ax_tau.set_ylabel("max |torque| / limit [-]")
+    ax_tau.set_title("torques against their limits")
     com, goal = out["com"], out["com_goal"]
     for j, axis in enumerate("xyz"):
         ax_com.plot(t, 1e3 * (com[:, j] - com[0, j]), color=f"C{j}", label=f"CoM {axis}")
@@ -419,11 +445,12 @@ def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
     ax_com.set_ylabel("CoM - start [mm]")
     ax_com.set_title("centre of mass (world)")
     ax_com.set_xlabel("time [s]")
-    for ax in (ax_f, ax_cop, ax_com):
+    for ax in (ax_f, ax_cop, ax_tau, ax_com):
         ax.grid(True, alpha=0.3)
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7)
     side = out.get("side", "")
     over = f" over the {side} foot" if side else ""
-    fig.suptitle(f"Talos, torque control: the CoM moves{over}, the right hand reaches")
+    where = {"floor": " on a floor", "welded": ", feet welded"}.get(out.get("contacts", ""), "")
+    fig.suptitle(f"Talos{where}, torque control: CoM{over}, right hand reach, CoM back")
     _save(fig, path)
     return fig

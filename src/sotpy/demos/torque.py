@@ -203,10 +203,15 @@ def run_talos_torque(
     device, dyn = robot.device, robot.dynamic
     model = robot.model
     # flat soles: the SRDF's half-sitting rolls the ankles by -1.7 mrad (the soles' inner
-    # and outer edges 0.2 mm apart), which a floor shows as a first-tick rocking
+    # and outer edges 0.2 mm apart), which a floor shows as a first-tick rocking; and the
+    # joints 1 mrad inside their limits (the grippers rest on theirs)
     q_start = np.array(device.state.value)
     for joint in ("leg_left_6_joint", "leg_right_6_joint"):
         q_start[model.joints[model.getJointId(joint)].idx_q] = 0.0
+    iq0 = model.nq - (model.nv - 6)
+    q_start[iq0:] = np.clip(
+        q_start[iq0:], model.lowerPositionLimit[iq0:] + 1e-3, model.upperPositionLimit[iq0:] - 1e-3
+    )
     device.set(q_start)
     ctrl = Controller(f"{prefix}_ctrl", dyn)
     ctrl.dt.value = dt
@@ -221,7 +226,7 @@ def run_talos_torque(
     ctrl.addCartesianTask("hand", robot.opPoints["right-wrist"], hand_weight, 0)
     ctrl.addJointTask("posture", 1e-2, 0)
     ctrl.addTorqueLimits("torque")
-    ctrl.addJointPositionLimits("qlim", 0.05)
+    ctrl.addJointPositionLimits("qlim", 0.05, 1e-4)
     ctrl.setResolutionStrategy(strategy)
     ctrl.setRampDuration("hand", hand_ramp)
 
@@ -309,7 +314,7 @@ def run_talos_torque(
     wrenches = np.empty((n, 2, 6))
     ctrl_wrenches = np.empty((n, 2, 6))
     torques = np.empty((n, len(limits)))
-    point_min = np.full(n, np.inf)
+    corner_fz = np.zeros((n, 8))  # the floor's corner forces, left sole's then right's
     placements = np.empty((n, 2, 4))  # per sole: x, y, z displacement, rotation angle
     found = True
     for k in range(n):
@@ -345,15 +350,14 @@ def run_talos_torque(
             wrenches[k, i] = _local_wrench(M.rotation, forces[foot.frame])
             placements[k, i, :3] = M.translation - sole0[i].translation
             placements[k, i, 3] = np.linalg.norm(pin.log3(sole0[i].rotation.T @ M.rotation))
-        normals = [p.force[2] for p in device.contactPoints()]
-        if contacts == "floor":
-            point_min[k] = min(normals) if len(normals) == 8 else 0.0  # a corner off
+        for p in device.contactPoints():  # a corner off the floor is not listed: 0
+            corner_fz[k, 4 * (p.frame == feet[1].frame) + p.index] = p.force[2]
         coms[k] = pin.centerOfMass(model, data, q)
         times[k] = (k + 1) * dt
 
     out = _talos_checks(
         times, coms, com_ref, hands, hand_ref, wrenches, ctrl_wrenches, torques, placements,
-        point_min, feet, mu, dt, limits, (k_shift, k_ramp),
+        corner_fz if contacts == "floor" else None, feet, mu, dt, limits, (k_shift, k_ramp),
     )  # fmt: skip
     out.update(
         {
@@ -367,6 +371,7 @@ def run_talos_torque(
             "joint_names": list(model.names)[-len(limits) :],
             "phases": phases,
             "soles": [{"length": f.length, "width": f.width, "offset": f.offset[:2]} for f in feet],
+            "sole_margin": sole_margin,
             "plot": None,
         }
     )
@@ -385,7 +390,7 @@ TALOS_TOLERANCES = {"slide": 1e-3, "tilt": 1e-2, "tracking": 1e-3, "cop_margin":
 
 def _talos_checks(
     times, coms, com_ref, hands, hand_ref, wrenches, ctrl_wrenches, torques, placements,
-    point_min, feet, mu, dt, limits, ramp_window,
+    corner_fz, feet, mu, dt, limits, ramp_window,
 ) -> dict[str, Any]:  # fmt: skip
     """The checks of ``run_talos_torque`` from its recorded arrays (see its doc)."""
     fz = wrenches[:, :, 2]
@@ -415,13 +420,16 @@ def _talos_checks(
         "hand": hands,
         "hand_ref": hand_ref,
         "wrenches": wrenches,
+        "sole_motion": placements,
+        "corner_fz": corner_fz,
+        "ramp_ticks": (k0, k1),
         "torques": torques,
         "torque_limits": np.asarray(limits, dtype=float),
         "feet_slide": float(np.max(np.linalg.norm(placements[:, :, :2], axis=2))),
         "feet_lift": float(np.max(np.abs(placements[:, :, 2]))),
         "feet_tilt": float(np.max(placements[:, :, 3])),
         "min_fz": float(np.min(fz)),
-        "min_point_force": float(np.min(point_min)),
+        "min_point_force": np.nan if corner_fz is None else float(np.min(corner_fz)),
         "friction_ratio": friction,
         "cop_margin": cop_margin,
         "max_rate_ratio": float(np.max(dtau / step)),
@@ -430,6 +438,7 @@ def _talos_checks(
         "hand_tracking": float(np.nanmax(hand_err[ramp_end:])),
         "max_torque_ratio": float(np.max(np.abs(torques) / limits)),
         "max_wrench_mismatch": float(np.max(np.abs(ctrl_wrenches - wrenches))),
+        "wrench_mismatch": np.abs(ctrl_wrenches - wrenches).max(axis=(1, 2)),
     }
 
 
@@ -441,7 +450,7 @@ def _talos_verdict(out: dict[str, Any], contacts: str) -> None:
         and out["feet_slide"] <= tol["slide"]
         and out["feet_tilt"] <= tol["tilt"]
         and out["min_fz"] > 0
-        and (contacts != "floor" or out["min_point_force"] > 0)
+        and not out["min_point_force"] <= 0  # a corner off the floor (NaN: welded feet)
         and out["cop_margin"] >= tol["cop_margin"]
         and out["friction_ratio"] <= 1.0
         and out["max_rate_ratio"] <= 1.0 + 1e-6
@@ -455,7 +464,7 @@ def _talos_verdict(out: dict[str, Any], contacts: str) -> None:
     out["summary"] = (
         f"talos-torque {'OK' if ok else 'FAILED'} ({contacts}):"
         f" feet slide {1e3 * out['feet_slide']:.3f} mm, tilt {1e3 * out['feet_tilt']:.2f} mrad,"
-        f" min f_z {out['min_fz']:.0f} N, min corner force {out['min_point_force']:.0f} N,"
+        f" min f_z {out['min_fz']:.0f} N, min corner f_z {out['min_point_force']:.0f} N,"
         f" min CoP margin {1e3 * out['cop_margin']:.1f} mm,"
         f" max |f_t|/(mu f_z) {out['friction_ratio']:.2f},"
         f" max torque step {out['max_rate_ratio']:.2f} of its bound in the ramp,"

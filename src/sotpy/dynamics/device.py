@@ -566,7 +566,7 @@ class Device(Entity):
         return [] if self._floor is None else list(self._floor.points)
 
     @command
-    def setExternalWrench(self, frame: str, wrench: np.ndarray) -> None:
+    def setExternalWrench(self, frame: str, wrench: Any) -> None:
         """Apply ``wrench`` (6: force in N then torque in N m, world axes, at the
         frame's origin) to ``frame`` in every torque-mode step, until cleared
         (``clearExternalWrenches``, or a zero wrench)."""
@@ -575,7 +575,10 @@ class Device(Entity):
                 f"{self._who('setExternalWrench')}: {frame!r} is not a frame of the model; "
                 "nothing is applied"
             )
-        w = np.asarray(wrench, dtype=np.float64)
+        try:
+            w = np.asarray(wrench, dtype=np.float64)
+        except (TypeError, ValueError):
+            w = np.zeros(0)
         if w.shape != (6,) or not np.isfinite(w).all():
             raise ContactError(
                 f"{self._who('setExternalWrench')}: the wrench must be 6 finite values "

@@ -334,7 +334,9 @@ class Controller(Entity):
 
     @command
     def setTaskWeight(self, name: str, weight: float) -> None:
+        """The task's weight (>= 0); a change is a transition (bounded torque rate)."""
         self._wrap("setTaskWeight", self._task("setTaskWeight", name).setWeight, weight)
+        self.core.transition = True
         self.solution.setReady()
 
     @command
@@ -379,10 +381,11 @@ class Controller(Entity):
         )
 
     @command
-    def addJointPositionLimits(self, name: str, horizon: float) -> None:
-        """``q + h v + h^2/2 a`` within the model's position limits."""
+    def addJointPositionLimits(self, name: str, horizon: float, margin: float = 0.0) -> None:
+        """``q + h v + h^2/2 a`` (and the next tick's ``q``) within the model's position
+        limits, ``margin`` (rad) inside them."""
         self._addConstraint(
-            "addJointPositionLimits", JointPositionLimit, name, self.core.robot, horizon
+            "addJointPositionLimits", JointPositionLimit, name, self.core.robot, horizon, margin
         )
 
     @command

@@ -5,8 +5,9 @@ constraint                  rows
 ==========================  =================================================================
 dynamics (always on)        ``M a - S^T tau - sum_c J_c^T f_c = -b`` (equality, nv rows)
 JointTorqueLimit            ``tau_min <= tau <= tau_max`` (N m)
-JointPositionLimit(h)       ``q_min <= q + h v + h^2/2 a <= q_max`` for the 1-D joints
-                            with finite limits, horizon ``h`` (s), and the next tick's
+JointPositionLimit(h, m)    ``q_min + m <= q + h v + h^2/2 a <= q_max - m`` for the 1-D
+                            joints with finite limits, horizon ``h`` (s), margin ``m``
+                            (default 0), and the next tick's
                             ``q + dt v + dt^2 a`` (the semi-implicit Euler step of the
                             Device, ``dt`` the control period): a continuous-time
                             horizon alone lets the discrete step overshoot
@@ -252,9 +253,12 @@ class JointVelocityLimit(Constraint):
 
 class JointPositionLimit(Constraint):
     """``q_min <= q + h v + h^2/2 a <= q_max`` and ``q_min <= q + dt v + dt^2 a <= q_max``
-    (the next tick, ``dt = robot.dt``) for the one-dimensional joints."""
+    (the next tick, ``dt = robot.dt``) for the one-dimensional joints; ``margin`` (rad or
+    m, >= 0, less than half a joint's range) keeps ``q`` that far inside the model's
+    limits (the real robot, or another simulator, does not integrate exactly as the
+    prediction)."""
 
-    def __init__(self, name: str, robot: RobotModel, horizon: float) -> None:
+    def __init__(self, name: str, robot: RobotModel, horizon: float, margin: float = 0.0) -> None:
         super().__init__(name)
         self.horizon = _horizon(name, horizon)
         lo = robot.model.lowerPositionLimit[robot.iq1]
@@ -262,7 +266,14 @@ class JointPositionLimit(Constraint):
         keep = (np.abs(lo) < _NO_LIMIT) & (np.abs(hi) < _NO_LIMIT)
         self.iq = robot.iq1[keep]
         self.iv = robot.iv1[keep]
-        self.lower, self.upper = lo[keep], hi[keep]
+        m = float(margin)
+        if not (math.isfinite(m) and m >= 0 and np.all(2 * m < hi[keep] - lo[keep])):
+            raise SotpyError(
+                f"{name}: the margin must be >= 0 and less than half of every joint's range, "
+                f"got {margin}"
+            )
+        self.margin = m
+        self.lower, self.upper = lo[keep] + m, hi[keep] - m
 
     def count(self, robot: RobotModel, layout: Layout) -> int:
         return 2 * len(self.iq)

@@ -357,6 +357,8 @@ class WholeBodyController:
         objects = [*self._all(), *self.contact_states.values()]
         live = [x for x in objects if x.begin(t, dt)]
         ramping = any(x.state in ("activating", "deactivating") for x in objects)
+        if ramping:  # activated or deactivated directly, not through this controller
+            self.transition = True
         self._check_active(live)
         try:
             sol = self.solve(rate=self.transition or ramping)
