@@ -190,3 +190,12 @@ def test_pid_servos_against_a_hand_rolled_loop():
         q.signal(bad[0]).value = bad[1]
         with pytest.raises(SotpyError, match=bad[0]):
             _ = q.desiredAcceleration.value
+
+
+def test_a_demo_run_twice_in_one_session():
+    """The trajectories start when the run starts, not at tick 0 (a shell session runs
+    a demo after other ticks)."""
+    first = run_panda_torque(duration=0.6, settle=0.3, prefix="p1")
+    second = run_panda_torque(duration=0.6, settle=0.3, prefix="p2")
+    assert first["final_error"] < 1e-3 and second["final_error"] < 1e-3
+    assert second["max_tracking_error"] < 2 * first["max_tracking_error"] + 1e-3

@@ -57,7 +57,7 @@ def run_panda_torque(
 
     start = pin.SE3(ctrl.eePose.value)
     goal = pin.SE3(start.rotation, start.translation + np.asarray(offset, float))
-    traj.setTrajectory(start, goal, duration, 0)
+    traj.setTrajectory(start, goal, duration, max(device.state.time, 0))  # from now
     ctrl.activateTasksAndConstraints()
     device.setControlType("torque")
     plug(ctrl.torque, device.control)
@@ -150,11 +150,14 @@ def run_talos_torque(
     8-facet pyramids, the CoP ``sole_margin`` (m) inside the real soles of
     ``robot.feet``, normal force >= ``fmin`` (N), the soles' pose and velocity fed back
     with ``contact_gains`` (Kp 1/s^2, Kd 1/s)), the default contact wrench distribution
-    cost, a CoM task (weight 10, min-jerk reference, PD Kp = 100 1/s^2), a right-wrist
-    task (weight ``hand_weight``, PD Kp = 100), a posture task (weight 1e-2, half-sitting
-    clipped 1 mrad inside the joint limits, Kp = 25), torque limits and joint position
-    limits (horizon 0.05 s); transitions bounded in torque rate (the default, each
-    joint's effort limit per 0.1 s).
+    cost, a CoM task (weight 10, min-jerk reference, PID Kp = 100 1/s^2 with ``pid`` =
+    (Ki 1/s^3, anti-windup clamp m s); ``(0, 0)``: a PD), a right-wrist task (weight
+    ``hand_weight``, the same servo), a posture task (weight 1e-2, half-sitting clipped
+    1 mrad inside the joint limits, Kp = 25), torque limits and joint position limits
+    (horizon 0.05 s, 1e-4 rad inside the model's); transitions bounded in torque rate
+    (the default, each joint's effort limit per 0.1 s). The robot starts with flat soles
+    (the SRDF's half-sitting rolls the ankles by 1.7 mrad) and its joints 1 mrad inside
+    their limits.
 
     The returned checks are computed from the simulation, independently of the
     controller's rows (``tests/test_wbc_talos.py`` asserts them):
@@ -169,20 +172,26 @@ def run_talos_torque(
       ``cop_margin`` (m, the smallest distance of a CoP inside its real sole, < 0
       outside);
     * ``max_rate_ratio``: the largest ``|tau_k - tau_{k-1}| / (rate dt)`` over the
-      ticks of the hand's activation ramp, ``rate`` each
-      joint's effort limit per 0.1 s (Pinocchio's model, the documented bound): <= 1;
+      ticks of the hand's activation ramp, ``rate`` each joint's effort limit per 0.1 s
+      (Pinocchio's model, the documented bound): <= 1;
     * ``com_tracking`` and ``hand_tracking`` (m): the largest distance to the moving
       reference (CoM: horizontal, over the run; hand: from the end of its ramp);
       ``com_error`` (m, horizontal CoM to its start at the end) and ``hand_error``
       (m, wrist to its goal at the end);
     * ``max_torque_ratio`` (max ``|tau| / effort limit``), ``solution_found`` (at every
       tick), ``max_wrench_mismatch`` (N or N m, the controller's wrenches against the
-      simulated ones of the same tick), ``ok`` and ``summary`` (one line).
+      simulated ones of the same tick; ``wrench_mismatch`` per tick), ``ok`` (the
+      ``TALOS_TOLERANCES``) and ``summary`` (one line).
 
-    Returns these and the arrays ``times`` (n, s), ``com`` and ``com_ref`` (n x 3, m),
-    ``com_goal`` (3, the shift's goal), ``wrenches`` (n x 2 x 6: left then right sole,
-    sole frame, force then torque, simulated), ``torques`` (n x na, N m),
-    ``torque_limits`` (na), ``joint_names``, ``phases`` (name -> (start, end) s), and
+    Returns these and the raw arrays the checks come from: ``times`` (n, s), ``com``
+    and ``com_ref`` (n x 3, m), ``hand`` and ``hand_ref`` (n x 3, m; NaN before the
+    hand's task is activated), ``wrenches`` (n x 2 x 6: left then right sole, sole
+    frame, force then torque, simulated), ``corner_fz`` (n x 8, the floor's corner
+    normal forces, left sole's then right's, 0 for a corner off the floor; None with
+    welded feet), ``sole_motion`` (n x 2 x 4: each sole's displacement x, y, z in m and
+    rotation in rad from its start), ``torques`` (n x na, N m), ``torque_limits`` (na),
+    ``joint_names``, ``ramp_ticks`` (the hand's ramp, first and last tick),
+    ``com_goal`` (3, the shift's goal), ``phases`` (name -> (start, end) s), and
     ``plot`` (the PNG path or None: contact forces, CoPs, torques against their limits,
     CoM).
     """
@@ -242,7 +251,8 @@ def run_talos_torque(
     com_goal = np.array([centre[0], centre[1], com0[2]])
     com_traj = MinJerk(f"{prefix}_comTraj")
     com_traj.dt.value = dt
-    com_traj.setTrajectory(pin.SE3(np.eye(3), com0), pin.SE3(np.eye(3), com_goal), duration, 0)
+    tick0 = max(device.state.time, 0)  # the trajectories start now (a run may follow another)
+    com_traj.setTrajectory(pin.SE3(np.eye(3), com0), pin.SE3(np.eye(3), com_goal), duration, tick0)
     com_pos = MatrixHomoToPose(f"{prefix}_comPos")
     plug(com_traj.pose, com_pos.sin)
     com_vel = Selec_of_vector(f"{prefix}_comVel")
@@ -269,7 +279,7 @@ def run_talos_torque(
         "handVelocity", *pid,
     )  # fmt: skip
     hand_now = pin.SE3(ctrl.handPose.value)
-    hand_traj.setTrajectory(hand_now, hand_now, duration, 0)
+    hand_traj.setTrajectory(hand_now, hand_now, duration, tick0)
 
     # posture
     jservo = JointServo(f"{prefix}_jservo")
@@ -303,7 +313,6 @@ def run_talos_torque(
         "back": (k_reach * dt, k_back * dt),
         "settle": (k_back * dt, n * dt),
     }
-    tick0 = max(device.state.time, 0)
     hand_goal = None
     limits = model.effortLimit[6:]
     times = np.empty(n)
@@ -322,7 +331,8 @@ def run_talos_torque(
         if k == k_shift:  # the hand task ramps in where the hand is
             hand_now = pin.SE3(ctrl.handPose.value)
             hand_traj.setTrajectory(hand_now, hand_now, hand_ramp, t)
-            hand_servo.resetIntegral()
+            if pid[0] > 0:
+                hand_servo.resetIntegral()  # the PID starts from the hand where it is
             ctrl.activate("hand")
         if k == k_ramp:
             hand_goal = pin.SE3(

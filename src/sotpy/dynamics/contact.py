@@ -11,15 +11,15 @@ real floor. :class:`Floor` holds the floor's settings: its height, its friction
 coefficient and its stiffness (MuJoCo's soft-contact time constant and damping ratio).
 
 Why MuJoCo (measured on this project's Talos model, 1 ms steps, the same controller):
-Pinocchio 4's constraint solvers (``ADMMConstraintSolver`` over ``PointContactConstraint
-Model`` friction cones, with a Delassus matrix built from ``crba`` and the point
-Jacobians) gave the same motion as MuJoCo to within a fraction of a millimetre, but a
-step cost 6 to 7 times MuJoCo's (840 us against 120 us, ADMM needing 50 iterations on a
-median step and hitting its 500-iteration limit on some), and the time-stepping scheme,
-contact detection and penetration correction would have been ours to write and keep.
-MuJoCo's step is one C call, its contact solver converges on every step, and it is a
-second, independent implementation of the dynamics: the tests check the controller
-(Pinocchio's model) against another engine's contact forces, not against itself.
+Pinocchio 4's constraint solvers (``ADMMConstraintSolver`` over the friction cones of
+``PointContactConstraintModel``, with a Delassus matrix built from ``crba`` and the
+points' Jacobians) gave the same motion as MuJoCo, but a step cost 7 times MuJoCo's (840
+us against 120 us, ADMM needing 50 iterations on a median step and hitting its
+500-iteration limit on some), and the time stepping, contact detection and penetration
+correction would have been ours to write and keep. MuJoCo's step is one C call, its
+contact solver converges on every step, and it is a second, independent implementation
+of the dynamics: the tests check the controller (Pinocchio's model) against another
+engine's contact forces, not against itself.
 
 The model MuJoCo simulates is built from the ``pinocchio.Model`` (not from the URDF):
 one body per joint, at the joint's placement in its parent, with the joint's inertia
@@ -37,12 +37,13 @@ velocity in world axes, Pinocchio in the base frame)::
     qfrc_applied = (R tau_lin, tau_ang, joints)       (tau: generalised forces)
     mj_step (Euler: semi-implicit, v+ = v + a dt then q+ = q (+) v+ dt)
 
-MuJoCo's contacts are soft: a contact force ``f`` follows a damped spring on the
-penetration ``r`` of time constant ``T`` and damping ratio ``zeta`` (``solref``), so a
-foot sinks by about ``g T^2`` under its load (0.2 mm for ``T = 5 ms``); the friction is
-the exact Coulomb cone (``cone="elliptic"``) or MuJoCo's pyramid, and MuJoCo's
-*noslip* iterations (``noslip_iterations``) remove the slow creep that soft friction
-constraints otherwise allow under a steady tangential load.
+MuJoCo's contacts are soft: the penetration follows a damped spring of time constant
+``T`` and damping ratio ``zeta`` (``solref``), so that a resting body sinks by an amount
+that grows as ``T^2`` (a 10 kg box on four corners: 7 um at ``T = 5 ms``, 16 times more
+at 20 ms; Talos' soles 0.02 to 0.09 mm); the friction is the exact Coulomb cone
+(``cone="elliptic"``) or MuJoCo's pyramid, and MuJoCo's *noslip* iterations
+(``noslip_iterations``) remove the slow creep that soft friction constraints otherwise
+allow under a steady tangential load.
 
 The contact wrench of a patch (``Device.contactForces()``) is the sum of its points'
 forces (``mujoco.mj_contactForce``, the forces applied during the step), as a wrench at

@@ -59,7 +59,9 @@ def data_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[in
 
 def work_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[int, tuple]]:
     """Offsets and shapes of the workspace: the reduced QP ``H, g, Au, cu, Cy, lo_y,
-    hi_y, Tt, tt`` (as :meth:`.qp.WeightedQP.reduce`), the solution ``y``, scratch."""
+    hi_y, Tt, tt`` (as :meth:`.qp.WeightedQP.reduce`), the solution ``y``, scratch, and
+    an accepted guess's ``chi = (a, tau, f)`` and dynamics residual ``res``
+    (``||A chi - c||_inf``)."""
     ny, nu = n - na, nv - na
     kmax = nu + mc
     out: dict[str, tuple[int, tuple]] = {}
@@ -69,6 +71,7 @@ def work_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[in
         ("lo_y", (mc,)), ("hi_y", (mc,)), ("Tt", (na, ny)), ("tt", (na,)), ("y", (ny,)),
         ("L", (ny, ny)), ("ey", (ny,)), ("Wt", (kmax, ny)), ("u", (ny,)),
         ("S", (kmax, kmax)), ("Ls", (kmax, kmax)), ("b", (kmax,)), ("lam", (kmax,)),
+        ("chi", (n,)), ("res", (1,)),
     ):  # fmt: skip
         out[name] = (o, shape)
         o += int(np.prod(shape))
@@ -190,6 +193,10 @@ def _solve(
     bvec = ws[o : o + kmax]
     o += kmax
     lam = ws[o : o + kmax]
+    o += kmax
+    chi = ws[o : o + n]
+    o += n
+    res = ws[o : o + 1]
 
     for i in range(nv):
         for j in range(nv):
@@ -404,6 +411,27 @@ def _solve(
             s += Cy[i, j] * y[j]
         if s > hiy[i] + ptol * (1.0 + abs(hiy[i])) or s < loy[i] - ptol * (1.0 + abs(loy[i])):
             return status, False
+    for i in range(ny):
+        if not abs(y[i]) < 1e300:  # NaN passes the comparisons above
+            return status, False
+    # chi = (a, tau = Tt y + tt, f) and its dynamics residual
+    for i in range(nv):
+        chi[i] = y[i]
+    for i in range(nv, ny):
+        chi[i + na] = y[i]
+    for j in range(na):
+        s = tt[j]
+        for i in range(ny):
+            s += Tt[j, i] * y[i]
+        chi[nv + j] = s
+    rmax = 0.0
+    for i in range(nv):
+        s = -c[i]
+        for j in range(n):
+            s += A[i, j] * chi[j]
+        if abs(s) > rmax:
+            rmax = abs(s)
+    res[0] = rmax
     return status, True
 
 

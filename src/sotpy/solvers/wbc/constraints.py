@@ -334,13 +334,14 @@ class ContactState(Activatable):
         if c.bilateral or (c.kp == 0.0 and c.kd in (None, 0.0)):
             return None
         fid = robot.frame_id(c.frame)
-        M = robot.data.oMf[fid]
+        data = robot.data
+        M = data.oMf[fid]
         if self.reference is None:
             self.reference = pin.SE3(M)
         kp, kd = c.gains
-        e = pin.log6(self.reference.actInv(M)).vector
-        nu = robot.frame_velocity(fid, _LOCAL)
-        return (-kp * e - kd * nu)[: c.dim]
+        err = pin.log6(self.reference.actInv(M)) * kp  # Motion arithmetic, in C++
+        err += pin.getFrameVelocity(robot.model, data, fid, _LOCAL) * kd
+        return -(err.vector[: c.dim])
 
 
 class ContactConstraint(Constraint):
@@ -351,6 +352,7 @@ class ContactConstraint(Constraint):
         super().__init__(name)
         self.states: dict[str, ContactState] = {}
         self._friction: dict[ContactSpec, tuple[np.ndarray, np.ndarray]] = {}  # constant
+        self._plan: tuple | None = None  # (structure, [(spec, state, nf, ramp, slice, st)])
 
     def _friction_rows(self, c: ContactSpec) -> tuple[np.ndarray, np.ndarray]:
         fr = self._friction.get(c)
@@ -360,12 +362,21 @@ class ContactConstraint(Constraint):
 
     def structure(self, layout: Layout) -> tuple:
         """What the row count depends on: each contact's state (and, while a bilateral
-        contact deactivates, whether it has a wrench to ramp from)."""
+        contact deactivates, whether it has a wrench to ramp from). Also plans the rows
+        that :meth:`count` and :meth:`write` use until the next call."""
         out = []
+        states = self.states
         for c in layout.contacts:
-            st = self.states.get(c.key)
+            st = states.get(c.key)
             out.append("active" if st is None else (st.state, st.scale is None))
-        return tuple(out)
+        key = (layout, tuple(out))
+        if self._plan is None or self._plan[0] != key:
+            plan = []
+            for c in layout.contacts:
+                state, nf, ramp = self._blocks(c)
+                plan.append((c, state, nf, ramp, layout.f[c.key], states.get(c.key)))
+            self._plan = (key, plan)
+        return key[1]
 
     def _blocks(self, c: ContactSpec) -> tuple[str, int, int]:
         """(state, friction rows, ramp rows) of a contact."""
@@ -382,19 +393,17 @@ class ContactConstraint(Constraint):
                 ramp = c.dim
         return state, nf, ramp
 
+    def _planned(self, layout: Layout) -> list:
+        self.structure(layout)
+        return self._plan[1]
+
     def count(self, robot: RobotModel, layout: Layout) -> int:
-        m = 0
-        for c in layout.contacts:
-            _state, nf, ramp = self._blocks(c)
-            m += c.dim + nf + ramp
-        return m
+        return sum(c.dim + nf + ramp for c, _s, nf, ramp, _sl, _st in self._planned(layout))
 
     def write(self, robot, layout, C, lo, hi, first) -> None:
         r = 0
         a = layout.a
-        for c in layout.contacts:
-            state, nf, ramp = self._blocks(c)
-            sl = layout.f[c.key]
+        for c, state, nf, ramp, sl, st in self._planned(layout):
             d = c.dim
             if state == "inactive":  # f_c = 0
                 if first:
@@ -404,7 +413,10 @@ class ContactConstraint(Constraint):
                 r += d
                 continue
             C[r : r + d, a] = robot.contact_jacobian(c)
-            rhs = self._rhs(robot, c)
+            rhs = -robot.contact_drift(c)
+            fb = None if st is None else st.feedback(robot)
+            if fb is not None:
+                rhs += fb
             lo[r : r + d] = rhs
             hi[r : r + d] = rhs
             r += d
@@ -416,7 +428,6 @@ class ContactConstraint(Constraint):
                     hi[r : r + nf] = h
                 r += nf
             if ramp:
-                st = self.states[c.key]
                 if not c.bilateral:
                     F = robot.weight if state == "activating" or st.scale is None else st.scale[2]
                     if first:
@@ -430,13 +441,3 @@ class ContactConstraint(Constraint):
                     lo[r : r + d] = -bound
                     hi[r : r + d] = bound
                 r += ramp
-
-    def _rhs(self, robot: RobotModel, c: ContactSpec) -> np.ndarray:
-        """The contact's desired spatial acceleration minus its drift: ``-Jdot v`` plus
-        the feedback (:meth:`ContactState.feedback`)."""
-        rhs = -robot.contact_drift(c)
-        st = self.states.get(c.key)
-        fb = None if st is None else st.feedback(robot)
-        if fb is not None:
-            rhs += fb
-        return rhs

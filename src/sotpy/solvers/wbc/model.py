@@ -185,7 +185,8 @@ class RobotModel:
         self.minus_St = -self.S.T  # the torque columns of the equations of motion
         self._a0 = np.zeros(self.nv)
         self._strict_lower = np.tril(np.ones((self.nv, self.nv), dtype=bool), -1)
-        self.M = np.zeros((self.nv, self.nv))
+        self._M = np.zeros((self.nv, self.nv))
+        self._M_stale = True
         self.b = np.zeros(self.nv)
         # per-tick caches of the contact Jacobians and drifts (cleared by update)
         self._jac: dict[str, np.ndarray] = {}
@@ -226,22 +227,37 @@ class RobotModel:
                 f"RobotModel.update: expected q of size {self.nq} and v of size {self.nv},"
                 f" got {q.shape} and {v.shape}"
             )
-        if not (np.isfinite(q).all() and np.isfinite(v).all()):
+        if not math.isfinite(q.sum() + v.sum()) and not (
+            np.isfinite(q).all() and np.isfinite(v).all()  # the sum overflowed, or not
+        ):
             raise SotpyError("RobotModel.update: q or v is not finite")
         m, d = self.model, self.data
         pin.computeAllTerms(m, d, q, v)  # M (upper), nle, joint Jacobians, com, Jcom
         pin.forwardKinematics(m, d, q, v, self._a0)  # data.v, data.a at a = 0: drifts
         pin.updateFramePlacements(m, d)
         pin.centerOfMass(m, d, _ACCELERATION, False)  # vcom, acom of data.a (dJcom v)
-        M = self.M
-        np.copyto(M, d.M)
-        np.copyto(M, M.T, where=self._strict_lower)  # Pinocchio fills the upper triangle
+        self._M_stale = True
         np.copyto(self.b, d.nle)
         self._g = None
         self._jac.clear()
         self._drift.clear()
         self.q = q.copy()
         self.v = v.copy()
+
+    @property
+    def M(self) -> np.ndarray:
+        """The joint-space inertia ``M(q)`` (nv x nv, symmetric) at the last
+        :meth:`update` (built when first read after it; do not modify it)."""
+        if self._M_stale:
+            self.write_mass_matrix(self._M)
+            self._M_stale = False
+        return self._M
+
+    def write_mass_matrix(self, out: np.ndarray) -> None:
+        """Write ``M(q)`` into ``out`` (nv x nv, a view may be strided): Pinocchio's upper
+        triangle, mirrored."""
+        np.copyto(out, self.data.M)
+        np.copyto(out, out.T, where=self._strict_lower)
 
     @property
     def g(self) -> np.ndarray:

@@ -98,6 +98,7 @@ class WeightedQP:
             _kernels.warm_up()
         self.guess_hits = 0
         self.daqp_solves = 0
+        self.last_residual: float | None = None  # the compiled guess's dynamics residual
         self.last_method = ""
         self._key: tuple | None = None
         self._ws: tuple | None = None  # (sizes, workspace, views) of the compiled kernel
@@ -175,13 +176,14 @@ class WeightedQP:
     ) -> tuple[np.ndarray | None, str]:
         """:meth:`solve` with the task rows stacked (``E`` m x n, ``f``, ``w`` = diag W).
         ``packed``: the flat array the arrays are views of, laid out by
-        :func:`._kernels.data_layout` (the controller's buffers are); otherwise they
+        ``_kernels.data_layout`` (the controller's buffers are); otherwise they
         are copied into one for the compiled kernel. ``keep``: the constraint rows of
         the previous solve kept at the same places when the number of rows changed
         (rows appended or removed at the end): its active set is still a guess there."""
         nv, na, n = layout.nv, layout.na, layout.n
         m, mc = E.shape[0], C.shape[0]
         key = (n, mc, nv - na)
+        self.last_residual: float | None = None
         if key != self._key and self._key is not None and keep and self._key[0::2] == key[0::2]:
             inside = self._active < min(keep, mc)
             self._active, self._upper = self._active[inside], self._upper[inside]
@@ -197,7 +199,11 @@ class WeightedQP:
                 args = (packed, ws, nv, na, n, m, mc, float(regularisation))
                 status, ok = self._kernel(*args, guess)
                 data = views
-                y = views[9] if ok else None
+                if ok:  # the kernel assembled chi and its residual
+                    self.guess_hits += 1
+                    self.last_method = "guess"
+                    self.last_residual = float(views[11][0])
+                    return views[10].copy(), ""
             except TypeError as exc:  # argument types the kernel was not compiled for
                 self._stop_jit(exc)
                 data = None
@@ -244,12 +250,12 @@ class WeightedQP:
 
     def _workspace(self, nv: int, na: int, n: int, m: int, mc: int) -> tuple[np.ndarray, list]:
         """The kernel's workspace for these sizes (kept) and its views ``(H, g, Au, cu,
-        Cy, lo_y, hi_y, Tt, tt, y)``."""
+        Cy, lo_y, hi_y, Tt, tt, y, chi, res)``."""
         dims = (nv, na, n, m, mc)
         if self._ws is None or self._ws[0] != dims:
             lay = _kernels.work_layout(*dims)
             ws = np.zeros(lay["size"][0])
-            names = ("H", "g", "Au", "cu", "Cy", "lo_y", "hi_y", "Tt", "tt", "y")
+            names = ("H", "g", "Au", "cu", "Cy", "lo_y", "hi_y", "Tt", "tt", "y", "chi", "res")
             views = [_view(ws, *lay[k]) for k in names]
             self._ws = (dims, ws, views)
         return self._ws[1], self._ws[2]
@@ -323,7 +329,7 @@ def _view(buf: np.ndarray, offset: int, shape: tuple) -> np.ndarray:
 
 
 def pack(layout: Layout, A, c, E, f, w, C, lo, hi) -> np.ndarray:
-    """The problem's arrays copied into one flat array (:func:`._kernels.data_layout`)."""
+    """The problem's arrays copied into one flat array (``_kernels.data_layout``)."""
     lay = _kernels.data_layout(layout.nv, layout.na, layout.n, E.shape[0], C.shape[0])
     data = np.empty(lay["size"][0])
     for name, arr in zip(("A", "c", "E", "f", "w", "C", "lo", "hi"), (A, c, E, f, w, C, lo, hi),

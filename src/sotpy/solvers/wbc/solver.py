@@ -44,7 +44,8 @@ joint's torque may change by at most ``rate_j dt`` per tick:
 
     tau_prev - rate dt <= tau <= tau_prev + rate dt
 
-(``tau_prev`` the torque of the previous tick; ``rate`` of :meth:`setTorqueRateLimit`,
+(``tau_prev`` the torque of the previous tick; ``rate`` of
+:meth:`WholeBodyController.setTorqueRateLimit`,
 N m/s, by default the joint's effort limit per ``RATE_TIME`` = 0.1 s: 3 N m per 1 ms
 tick on a 300 N m knee, 1 N m on a 100 N m ankle), hard rows like the torque limits.
 The activation ramps themselves are smooth (:mod:`.activation`). If the rows make the
@@ -431,8 +432,8 @@ class WholeBodyController:
         for task in self.tasks.values():
             if task.state == "inactive":
                 continue
-            w = task.row_weight_vector()
-            if w.any():  # w >= 0: a task whose rows all have weight 0 counts for nothing
+            w, some = task._weights()
+            if some:  # w >= 0: a task whose rows all have weight 0 counts for nothing
                 live.append((task, w))
         cons = [c for c in self.constraints.values() if c.state != "inactive"]
         counts = tuple(c.count(robot, layout) for c in cons)
@@ -459,7 +460,7 @@ class WholeBodyController:
                 key, layout, robot, live, cons, counts, cc.count(robot, layout), cost, rate_keep
             )
         A = asm.A
-        np.copyto(asm.A_a, robot.M)
+        robot.write_mass_matrix(asm.A_a)
         for c in layout.contacts:
             np.negative(robot.contact_jacobian(c).T, out=A[:, layout.f[c.key]])
         np.negative(robot.b, out=asm.c)
@@ -472,7 +473,7 @@ class WholeBodyController:
         cc.write(robot, layout, C, lo, hi, first)
         if cost:
             E, _f, wv = asm.cost_rows
-            self.contact_cost.write(robot, layout, cost, E, wv)
+            self.contact_cost.write(robot, layout, cost, E, wv, first)
         if rate_keep is not None:
             C, lo, hi = asm.rate_rows
             if first:
@@ -501,17 +502,26 @@ class WholeBodyController:
                 chi, ok, reason = self._multilevel(dyn, cons, tasks)
         except (np.linalg.LinAlgError, ValueError) as exc:
             chi, ok, reason = None, False, f"solver error: {exc}"
-        if ok and not np.all(np.isfinite(chi)):
+        res = None
+        if (
+            ok
+            and self.strategy == "OneLevelWeighted"
+            and self.weighted_qp.last_residual is not None
+        ):
+            res = self.weighted_qp.last_residual  # the compiled guess: checked, finite
+        elif ok and not np.all(np.isfinite(chi)):
             ok, reason = False, "non-finite solution"
-        sol = self._split(chi, True, "", dyn) if ok else self._fallback(reason)
+        sol = self._split(chi, True, "", dyn, res) if ok else self._fallback(reason)
         sol.rate_limited = limited
         return sol
 
-    def _split(self, chi: np.ndarray, found: bool, reason: str, dyn) -> Solution:
-        """The Solution of ``chi`` (its blocks are views) and its residual in ``dyn``."""
+    def _split(self, chi: np.ndarray, found: bool, reason: str, dyn, res=None) -> Solution:
+        """The Solution of ``chi`` (its blocks are views) and its residual in ``dyn``
+        (``res`` when it is known)."""
         L = self.layout
-        A, c = dyn
-        res = float(np.abs(A @ chi - c).max()) if len(c) else 0.0
+        if res is None:
+            A, c = dyn
+            res = float(np.abs(A @ chi - c).max()) if len(c) else 0.0
         return Solution(
             chi, chi[: L.nv], chi[L.nv : L.nv + L.na], chi[L.nv + L.na :], found, reason, res
         )

@@ -113,12 +113,17 @@ class Task(Activatable):
         """``diag(W)``: ramp_weight(ramp) * weight * row weights * selection (the ramp's
         shape: :func:`.activation.ramp_weight`); do not modify the array returned (it
         is kept until the ramp or a weight changes through the setters)."""
+        return self._weights()[0]
+
+    def _weights(self) -> tuple[np.ndarray, bool]:
+        """``(diag(W), whether a row has a weight > 0)``, kept until a setter or the
+        ramp changes them."""
         key = (self.ramp, self.weight, id(self.row_weights), id(self.selection))
         cached = self._w_cache
         if cached is None or cached[0] != key:
             w = ramp_weight(self.ramp) * self.weight * self.row_weights * self.selection
-            cached = self._w_cache = (key, w)
-        return cached[1]
+            cached = self._w_cache = (key, w, bool(w.any()))
+        return cached[1], cached[2]
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
         """``(E, f)`` at the robot's current state (fresh arrays; by :meth:`write`)."""
@@ -263,7 +268,6 @@ class ContactWrenchCost:
     def __init__(self, weight: float = 0.1) -> None:
         self.setWeight(weight)
         self.loads: dict[str, float] = {}  # contact key -> F (N), from the last solution
-        self._unit: dict[ContactSpec, np.ndarray] = {}  # the rows for F = 1 N
 
     def setWeight(self, weight: float) -> None:
         w = float(weight)
@@ -316,22 +320,29 @@ class ContactWrenchCost:
         return out
 
     def write(
-        self, robot: RobotModel, layout: Layout, contacts: list, E: np.ndarray, w: np.ndarray
+        self,
+        robot: RobotModel,
+        layout: Layout,
+        contacts: list,
+        E: np.ndarray,
+        w: np.ndarray,
+        first: bool = True,
     ) -> None:
         """The rows of ``contacts`` into ``E`` (a view of the problem's buffer, zero
-        outside the contacts' wrench columns) and their weights into ``w``; the target
-        is 0."""
+        outside the contacts' wrench columns; written if ``first``) and their weights
+        into ``w``; the target is 0. The rows for ``F = 1`` N are kept, and the load
+        goes into the weights: ``weight / F^2`` (the same squares as the rows over
+        ``F``)."""
         W = robot.weight
         count = sum(1 for c in layout.contacts if not c.bilateral)
         r = 0
         for c in contacts:
-            G = self._unit.get(c)
-            if G is None:
-                G = self._unit[c] = self.contact_rows(c, 1.0)
-            k = len(G)
-            np.multiply(G, 1.0 / self.load(c, W, count), out=E[r : r + k, layout.f[c.key]])
+            k = 2 if c.dim == 3 else 5
+            if first:
+                E[r : r + k, layout.f[c.key]] = self.contact_rows(c, 1.0)
+            F = self.load(c, W, count)
+            w[r : r + k] = self.weight / (F * F)
             r += k
-        w[:] = self.weight
 
     def rows(
         self, robot: RobotModel, layout: Layout, states: dict
