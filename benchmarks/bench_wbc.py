@@ -178,27 +178,24 @@ def main() -> None:
     print(machine_line(f"numba {numba.__version__}", "one BLAS thread"))
     print(f"strategy {args.strategy}, {args.ticks} ticks of Talos on the floor, closed loop")
     print(f"  floor (crba, nle, joint Jacobians, 2 contact Jacobians): median {us(fl):.1f} us")
+    weighted = args.strategy == "OneLevelWeighted"
+    guess = f"; guessed active set {r['guess']:.0%} of ticks" if weighted else ""
     print(
-        f"  weighted tick: median {us(tk):.1f} us, p90 {us(np.percentile(r['tick'], 90)):.1f}"
-        f" us, worst {us(r['tick'].max()):.1f} us; guessed active set {r['guess']:.0%} of ticks"
+        f"  tick: median {us(tk):.1f} us, p90 {us(np.percentile(r['tick'], 90)):.1f}"
+        f" us, worst {us(r['tick'].max()):.1f} us{guess}"
     )
     print(f"  ratio tick / floor (medians): {tk / fl:.2f}")
     p = {k: np.median(v) for k, v in r["parts"].items()}
     rest = tk - p["update"] - p["problem"] - p["kernel"]
+    solver = (
+        f", QP kernel {us(p['kernel']):.1f} ({p['kernel'] / p['floor']:.2f})" if weighted else ""
+    )
+    what = "the rest of the tick" if weighted else "the hierarchy and the rest"
     print(
-        "  parts (medians, us; floor in that pass {:.1f}): update {:.1f} ({:.2f} x floor),"
-        " rows {:.1f} ({:.2f}), QP kernel {:.1f} ({:.2f}), the rest of the tick {:.1f}"
-        " ({:.2f})".format(
-            us(p["floor"]),
-            us(p["update"]),
-            p["update"] / p["floor"],
-            us(p["problem"]),
-            p["problem"] / p["floor"],
-            us(p["kernel"]),
-            p["kernel"] / p["floor"],
-            us(rest),
-            rest / fl,
-        )
+        f"  parts (medians, us; the floor in that pass {us(p['floor']):.1f}): update"
+        f" {us(p['update']):.1f} ({p['update'] / p['floor']:.2f} x floor), rows"
+        f" {us(p['problem']):.1f} ({p['problem'] / p['floor']:.2f}){solver}, {what}"
+        f" {us(rest):.1f} ({rest / fl:.2f})"
     )
 
 
