@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
+from ... import _jit
 from ..._jit import refused
 from ...errors import SotpyError
 from . import _kernels
@@ -95,7 +96,8 @@ class WeightedQP:
             )
         self.jit = bool(_kernels.solve is not None and tail) if jit is None else bool(jit)
         if self.jit:
-            _kernels.warm_up()
+            # compiled in a child process on a machine's first use, said on stderr
+            _jit.prepare("the whole-body QP kernel", ["sotpy.solvers.wbc._kernels"])
         self.guess_hits = 0
         self.daqp_solves = 0
         self.last_residual: float | None = None  # the compiled guess's dynamics residual
