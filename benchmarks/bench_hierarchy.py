@@ -135,7 +135,7 @@ def _row(name, times, extra=""):
     )
 
 
-def run(n_solves: int, n_ref: int) -> str:
+def run(n_solves: int, n_ref: int, **budget: float | None) -> str:
     ref = _reference()
     lines = [
         "## sotpy.solvers: hierarchical least squares, n = 40",
@@ -150,7 +150,7 @@ def run(n_solves: int, n_ref: int) -> str:
     # ---------------------------------------------------------------- equality
     eq = EqualityStack()
     inputs = [eq.levels(t) for t in range(n_solves)]
-    solver = HierarchySolver()
+    solver = HierarchySolver(**budget)
     for levels in inputs[:20]:  # warm-up (buffers, merge plan)
         solver.solve(levels)
     t_solver, _ = _timed(solver.solve, inputs)
@@ -160,7 +160,7 @@ def run(n_solves: int, n_ref: int) -> str:
     for levels in inputs[:: max(1, n_solves // 50)]:
         x_ref, _ = ref.projector_hierarchy(levels)
         worst = max(worst, float(np.abs(solver.solve(levels).x - x_ref).max()))
-    damped = HierarchySolver(damping=0.05)
+    damped = HierarchySolver(damping=0.05, **budget)
     t_damped, _ = _timed(damped.solve, inputs)
     lines += [
         _row("equality, HierarchySolver.solve", t_solver, f"max abs(x - ref) {worst:.1e}"),
@@ -173,7 +173,7 @@ def run(n_solves: int, n_ref: int) -> str:
         name = "active" if active else "free"
         ineq = InequalityStack(active)
         inputs = [ineq.levels(t) for t in range(n_solves)]
-        solver = HierarchySolver()
+        solver = HierarchySolver(**budget)
         for levels in inputs[:20]:
             solver.solve(levels)
         its: list[int] = []
@@ -204,7 +204,7 @@ def run(n_solves: int, n_ref: int) -> str:
     # ------------------------------------------------------- box + equalities
     box = BoxStack()
     inputs = [box.levels(t) for t in range(n_solves)]
-    solver = HierarchySolver()
+    solver = HierarchySolver(**budget)
     for levels in inputs[:20]:
         solver.solve(levels)
     its = []

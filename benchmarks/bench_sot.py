@@ -112,6 +112,8 @@ REACH = {
     "romeo": np.array([0.12, 0.0, 0.16]),
     "nao": np.array([0.06, 0.0, 0.08]),
 }
+#: the contender that runs the tutorial's graph (docs/tutorial-reach.md)
+TUTORIAL = "sotpy, tutorial graph (feet + balance TaskInequality)"
 #: QP back-ends of qpsolvers tried for Pink, in this order
 PINK_SOLVERS = ("daqp", "proxqp", "quadprog", "piqp", "osqp", "clarabel", "highs")
 #: extra Talos op points for the scaling in the number of tasks (name -> frame)
@@ -308,6 +310,41 @@ def build_sotpy_reach(
         sot.push(t)
     plug(sot.control, dev.control)
     dev.setControlType("velocity")
+    return SotpyController(dev, sot, stack)
+
+
+def build_sotpy_tutorial(scene: ReachScene, prefix: str = "tut_") -> SotpyController:
+    """The humanoid graph of ``docs/tutorial-reach.md`` as the tutorial writes it: joint
+    limits, then the feet and the balance polygon in ONE ``TaskInequality`` (the CoM's
+    ground projection within the support polygon shrunk by 1 cm: inequality rows), the
+    wrist's position with SoT's adaptive gain, the posture. Its wrist target is the
+    scene's (the same as the other contenders')."""
+    from sotpy.tasks import TaskInequality
+
+    r = load_robot(scene.robot, prefix=prefix + scene.robot)
+    dev = r.device
+    dev.set(scene.q0)
+    dev.setControlType("velocity")
+    lf, rf = r.tasks["left-ankle"], r.tasks["right-ankle"]
+    balance = r.tasks["balance"]
+    contact = TaskInequality(prefix + "contact")
+    for f in (lf.feature, rf.feature, balance.feature):
+        contact.add(f)
+    bounds = balance.bounds()
+    contact.referenceInf.value = np.r_[np.zeros(12), np.full(len(bounds), -np.inf)]
+    contact.referenceSup.value = np.r_[np.zeros(12), bounds]
+    contact.dt.value = DT
+    contact.controlGain.value = 1.0
+    rh = r.tasks["right-wrist"]
+    rh.gotoNd(scene.target, "111000", gain=(10.0, 2.0, 0.05, 0.5))
+    posture = r.tasks["posture"]
+    posture.gain.setConstant(1.0)
+    sot = SOT(prefix + "sot", r.dynamic)
+    sot.dt.value = DT
+    stack = [contact, rh.task, posture.task]
+    for task in stack:
+        sot.push(task)
+    plug(sot.control, dev.control)
     return SotpyController(dev, sot, stack)
 
 
@@ -655,6 +692,7 @@ def compare(
         "sotpy, tasks through their signals": lambda: SotpyRunner(
             build_sotpy_reach(scene, prefix="sig_", fused=False), scene, ticks, True
         ),
+        TUTORIAL: lambda: SotpyRunner(build_sotpy_tutorial(scene), scene, ticks, True),
     }
     for s in solvers:
         makers[f"Pink {s}"] = lambda s=s: PinkRunner(build_pink_reach(scene), scene, ticks, s, True)
@@ -681,6 +719,11 @@ def compare(
         if fastest
         else []
     )
+    tutorial_ratios = (
+        [s / p for s, p in zip(contenders[TUTORIAL].medians, fastest.medians, strict=True)]
+        if fastest and not contenders[TUTORIAL].failure
+        else []
+    )
     return {
         "scene": scene,
         "ticks": ticks,
@@ -688,6 +731,7 @@ def compare(
         "contenders": contenders,
         "fastest": fastest.name if fastest else None,
         "ratios": ratios,
+        "tutorial_ratios": tutorial_ratios,
         "screening": screening,
         "screen_ticks": screen_ticks,
         "pink": has_pink,
@@ -747,6 +791,14 @@ def compare_table(result: dict[str, Any]) -> str:
             f"sotpy / {result['fastest']}: median of per-repeat ratios "
             f"**{statistics.median(r):.2f}** (range {min(r):.2f} to {max(r):.2f})."
         )
+        t = result.get("tutorial_ratios") or []
+        if t:
+            tut = result["contenders"][TUTORIAL].pooled()
+            lines.append(
+                f"{TUTORIAL} / {result['fastest']}: **{statistics.median(t):.2f}** (range"
+                f" {min(t):.2f} to {max(t):.2f}); its p99 / median"
+                f" **{np.percentile(tut, 99) / np.median(tut):.2f}**."
+            )
     else:
         lines.append("No Pink back-end completed the episode: no ratio.")
     return "\n".join(lines)

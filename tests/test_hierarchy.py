@@ -489,7 +489,7 @@ def test_benchmark_script_runs():
     spec = importlib.util.spec_from_file_location("bench_hierarchy", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    table = bench.run(25, 3)
+    table = bench.run(25, 3, time_budget=None)  # answers that do not depend on the speed
     assert table.count("| equality") == 4 and table.count("| inequalities") == 4
     # the solver agrees with the reference cascade on the sampled solves
     for line in table.splitlines():

@@ -98,7 +98,8 @@ inactive row of the levels ``<= j`` it would leave) adds the levels below, so le
 
 Output: ``x``, ``res`` (``||v_k(x)||`` per level), ``ranks`` (the directions each level's
 rows fixed, its held rows included), ``fro`` (``||A_k||_F``), ``info = [iterations,
-reason, solved levels, error, error row, error column, active inequality rows]``;
+reason, solved levels, error, error row, error column, active inequality rows,
+inequality rows]``;
 ``reason``: :data:`OPTIMAL`, :data:`ITERATIONS`, :data:`TIME`; ``error``: :data:`OK` or
 the first problem found in the input or the result. ``status`` (-1, 0, +1) and ``attach``
 (the level a row is held for; its own level when in ``own``) carry the warm start from
@@ -252,8 +253,9 @@ def _check(A, lo, up, info) -> bool:
 
 
 def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter, budget,
-          x_out, res, ranks, fro, info) -> None:  # fmt: skip
-    """See the module docstring (the compiled twin has the same arguments)."""
+          x_out, res, ranks, fro, info, wf=None, wi=None) -> None:  # fmt: skip
+    """See the module docstring (the compiled twin has the same arguments; ``wf``, ``wi``:
+    its scratch arrays, unused here)."""
     start = time.thread_time()
     m = A.shape[0]
     p = len(starts) - 1
@@ -304,6 +306,9 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     its = 1
     x = e.xs[2 * p + 1]
     stale = False
+    # x is the recursion's point of the current active rows, nothing changed since: every
+    # phase's target is x itself (the usual tick: the guess was right)
+    at_ehqp = True
     for j in range(p + 1):
         upto = 2 * j + 2 if j < p else 2 * p + 1  # the sub-levels phase j sees
         scope = ineq[level_of[ineq] <= min(j, p - 1)]  # the rows that may block
@@ -328,7 +333,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                 e = _ehqp(A, t, subrows, lam_sub, phis, rank_tol, 2 * p + 1)
                 its += 1
                 longest = max(longest, time.thread_time() - began)
-                stale = False
+                stale = at_ehqp = False
             # held rows that depend on the rows above them (a guess from the previous call
             # that no longer fits, a degenerate vertex) leave: held rows are constraints the
             # point must meet
@@ -345,7 +350,10 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
             # correction of x; then the levels below likewise (they do not change level j,
             # and the step heads for the whole answer); the last phase: the minimum-norm
             # point
-            if j < p:
+            if at_ehqp:
+                xj = e.xs[2 * j + 2] if j < p and lam_sub[2 * j + 1] else x
+                xp = x
+            elif j < p:
                 if lam_sub[2 * j + 1]:
                     # damped: the level's optimum is unique, the recursion's point (its
                     # steps lie in the fixed directions, so it is the damping's optimum)
@@ -365,7 +373,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
             # level j's own step first (a row it meets is held for it), then the look-ahead
             # (a row it meets is held for the level below)
             blocked = False
-            for target, hold in ((xj, j), (xp, j + 1)):
+            for target, hold in () if at_ehqp else ((xj, j), (xp, j + 1)):
                 tau, i, side = _ratio(A, x, target - x, cand, lo, up, anorm, move_tol)
                 if i < 0:
                     x = target
@@ -505,3 +513,4 @@ def _finish(A, lo, up, starts, x, e, status, ineq, its, reason, solved, x_out, r
     x_out[:] = x
     info[0], info[1], info[2] = its, reason, solved
     info[6] = int(np.count_nonzero(status[ineq]))
+    info[7] = len(ineq)

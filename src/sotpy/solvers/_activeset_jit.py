@@ -151,18 +151,20 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     Yt[c + i, col] -= vi * w[col]
 
     @kernel(fast=True)
-    def _level_step(M, mk, r, rhs, lam, u, G):  # pragma: no cover - compiled
-        """``u = argmin ||B^T u - rhs||^2 + lam^2 ||u||^2``, ``B^T[j, i] = M[j, i]``
-        (``i <= j``, lower trapezoidal, full column rank ``r``): forward substitution when
-        square and undamped, else a Householder QR of ``[B^T; lam I]`` (on the rows of
-        ``G``, its transpose, the right-hand side in row ``r``)."""
-        if lam == 0.0 and mk == r:
-            for j in range(r):
-                s = rhs[j]
-                for i in range(j):
-                    s -= M[j, i] * u[i]
-                u[j] = s / M[j, j]
-            return
+    def _forward(M, r, rhs, u):  # pragma: no cover - compiled
+        """``u`` solves ``B^T u = rhs`` for a square factor (``B^T[j, i] = M[j, i]``,
+        lower triangular, ``r x r``)."""
+        for j in range(r):
+            s = rhs[j]
+            for i in range(j):
+                s -= M[j, i] * u[i]
+            u[j] = s / M[j, j]
+
+    @kernel(fast=True)
+    def _ls_factor(M, mk, r, lam, G, gt):  # pragma: no cover - compiled
+        """Householder QR of ``[B^T; lam I]`` (``(mk + r) x r``, ``B^T[j, i] = M[j, i]``,
+        ``i <= j``, full column rank) on the rows of ``G`` (row ``i``: column ``i``; the
+        reflector after the diagonal, its factor in ``gt[i]``)."""
         w = mk + r
         for i in range(r):
             for j in range(w):
@@ -170,24 +172,22 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             for j in range(i, mk):
                 G[i, j] = M[j, i]
             G[i, mk + i] = lam
-        for j in range(mk):
-            G[r, j] = rhs[j]
-        for j in range(mk, w):
-            G[r, j] = 0.0
         for s in range(r):
             alpha = G[s, s]
             xn2 = 0.0
             for j in range(s + 1, w):
                 xn2 += G[s, j] * G[s, j]
             if xn2 == 0.0:
+                gt[s] = 0.0
                 continue
             beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
             t = (beta - alpha) / beta
+            gt[s] = t
             sc = 1.0 / (alpha - beta)
             for j in range(s + 1, w):
                 G[s, j] *= sc
             G[s, s] = beta
-            for q in range(s + 1, r + 1):
+            for q in range(s + 1, r):
                 d = G[q, s]
                 for j in range(s + 1, w):
                     d += G[s, j] * G[q, j]
@@ -195,29 +195,62 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 G[q, s] -= d
                 for j in range(s + 1, w):
                     G[q, j] -= d * G[s, j]
+
+    @kernel(fast=True)
+    def _ls_apply(G, gt, mk, r, rhs, u, y):  # pragma: no cover - compiled
+        """``u = argmin ||[B^T; lam I] u - [rhs; 0]||`` with the factor of
+        :func:`_ls_factor`: ``Q^T`` applied to the right-hand side, then ``R u = y``."""
+        w = mk + r
+        for j in range(mk):
+            y[j] = rhs[j]
+        for j in range(mk, w):
+            y[j] = 0.0
+        for s in range(r):
+            t = gt[s]
+            if t == 0.0:
+                continue
+            d = y[s]
+            for j in range(s + 1, w):
+                d += G[s, j] * y[j]
+            d *= t
+            y[s] -= d
+            for j in range(s + 1, w):
+                y[j] -= d * G[s, j]
         for s in range(r - 1, -1, -1):
-            v = G[r, s]
+            v = y[s]
             for q in range(s + 1, r):
                 v -= G[q, s] * u[q]
             u[s] = v / G[s, s]
 
     @kernel(fast=True)
-    def _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, k0, ws):  # pragma: no cover - compiled
+    def _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, k0, ws, nzp, nzi):  # pragma: no cover
         """The eHQP of the active rows ``act`` (sub-level ``s``: ``act[lstart[s]:lstart[s+1]]``)
         from sub-level ``k0`` on (the sub-levels above, their basis rows and points kept from
-        the last call). ``xs[s]``: the point before sub-level ``s``; ``xs[ns]`` the last."""
-        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, x, e, u, G, w = ws
+        the last call). ``xs[s]``: the point before sub-level ``s``; ``xs[ns]`` the last.
+        Rows with few nonzero entries (``nzp``/``nzi``: their columns) multiply the basis
+        by those columns only. The last sub-level with rows applies its reflectors to the
+        step only; the basis waits (``pend[0]``) until :func:`_complete` needs it, and the
+        bases saved after it are not valid (``pend[1]``: a restart below starts there)."""
+        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, x, e, u, Gs, gts, w, y, pend, sv = ws
         n = A.shape[1]
         ns = lstart.shape[0] - 1
+        if 0 <= pend[1] < k0:  # the bases saved after that sub-level were never formed
+            k0 = pend[1]
+        pend[0] = pend[1] = -1
+        last = -1
+        for k in range(ns):
+            if lstart[k + 1] > lstart[k]:
+                last = k
         ident = k0 == 0
         if k0 > 0:
             c = cs[k0]
+            src = sv[k0]  # the saved basis valid at k0 (-1: the identity)
             for i in range(c, n):
                 for col in range(n):
-                    Yt[i, col] = Ysave[k0, i, col]
+                    Yt[i, col] = Ysave[src, i, col] if src >= 0 else (1.0 if i == col else 0.0)
             for col in range(n):
                 x[col] = xs[k0, col]
-            ident = c == 0  # no direction fixed above: the saved basis is the identity
+            ident = src < 0
         else:
             for i in range(n):
                 for col in range(n):
@@ -225,17 +258,20 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 Yt[i, i] = 1.0
                 x[i] = 0.0
             cs[0] = 0
+        changed = True  # the basis changed since the last save
         for k in range(k0, ns):
             c = cs[k]
+            # the basis at the start of k, saved for a restart there: only when it changed
             if ident:
-                for i in range(c, n):
-                    for col in range(n):
-                        Ysave[k, i, col] = 0.0
-                    Ysave[k, i, i] = 1.0
-            else:
+                sv[k] = -1
+            elif changed or k == k0:
                 for i in range(c, n):
                     for col in range(n):
                         Ysave[k, i, col] = Yt[i, col]
+                sv[k] = k
+                changed = False
+            else:
+                sv[k] = sv[k - 1]
             for col in range(n):
                 xs[k, col] = x[col]
             r0 = lstart[k]
@@ -249,9 +285,17 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             for j in range(mk):
                 row = act[r0 + j]
                 a = A[row]
+                q0 = nzp[row]
+                q1 = nzp[row + 1]
                 if ident:
                     for i in range(n):
                         M[j, i] = a[i]
+                elif 3 * (q1 - q0) <= n:  # a sparse row (a posture, a bound, a coupling)
+                    for i in range(f):
+                        v = 0.0
+                        for q in range(q0, q1):
+                            v += a[nzi[q]] * Yt[c + i, nzi[q]]
+                        M[j, i] = v
                 else:
                     for i in range(f):
                         M[j, i] = _dot(a, Yt[c + i], n)
@@ -266,23 +310,63 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             if r > 0:
                 for j in range(mk):
                     w[j] = e[r0 + pv[j]]
-                _level_step(M, mk, r, w, lam_sub[k], u, G)
-                _reflect_basis(M, tau[k], r, f, Yt, c, n, w)
-                ident = False
-                for j in range(r):
-                    uj = u[j]
-                    for col in range(n):
-                        x[col] += uj * Yt[c + j, col]
+                if lam_sub[k] == 0.0 and mk == r:
+                    _forward(M, r, w, u)
+                else:  # kept for the corrections of this sub-level (see _correct)
+                    _ls_factor(M, mk, r, lam_sub[k], Gs[k], gts[k])
+                    _ls_apply(Gs[k], gts[k], mk, r, w, u, y)
+                if k == last:
+                    # the step Z Q [u; 0]: the reflectors on the vector, the basis later
+                    for i in range(f):
+                        y[i] = u[i] if i < r else 0.0
+                    for s in range(r - 1, -1, -1):
+                        ts = tau[k, s]
+                        if ts == 0.0:
+                            continue
+                        d = y[s]
+                        for i in range(s + 1, f):
+                            d += M[s, i] * y[i]
+                        d *= ts
+                        y[s] -= d
+                        for i in range(s + 1, f):
+                            y[i] -= d * M[s, i]
+                    for i in range(f):
+                        yi = y[i]
+                        for col in range(n):
+                            x[col] += yi * Yt[c + i, col]
+                    pend[0] = pend[1] = k
+                else:
+                    _reflect_basis(M, tau[k], r, f, Yt, c, n, w)
+                    ident = False
+                    changed = True
+                    for j in range(r):
+                        uj = u[j]
+                        for col in range(n):
+                            x[col] += uj * Yt[c + j, col]
             cs[k + 1] = c + r
         for col in range(n):
             xs[ns, col] = x[col]
 
     @kernel(fast=True)
+    def _complete(ws, lstart, n):  # pragma: no cover - compiled
+        """Apply the waiting sub-level's reflectors to the basis (see :func:`_ehqp`)."""
+        Yt, _, _, cs, Mw, _, tau, ranks, _, _, _, _, _, w, _, pend, _ = ws
+        k = pend[0]
+        if k < 0:
+            return
+        c = cs[k]
+        r0 = lstart[k]
+        _reflect_basis(Mw[r0 : lstart[k + 1]], tau[k], ranks[k], n - c, Yt, c, n, w)
+        pend[0] = -1
+
+    @kernel(fast=True)
     def _correct(A, t, act, lstart, s, x, ws, out, rhs):  # pragma: no cover - compiled
         """``out`` = ``x`` plus the least-squares step of (undamped) sub-level ``s`` taken
         from ``x``, with its factorisation from the last eHQP (see :mod:`._activeset`)."""
-        Yt, _, _, cs, Mw, piv, _, ranks, _, _, u, G, _ = ws
+        Yt, _, _, cs, Mw, piv, _, ranks, _, _, u, Gs, gts, _, y, pend, _ = ws
         n = A.shape[1]
+        if pend[0] == s:
+            _complete(ws, lstart, n)
         for col in range(n):
             out[col] = x[col]
         r = ranks[s]
@@ -294,7 +378,10 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         for j in range(mk):
             row = act[r0 + piv[r0 + j]]
             rhs[j] = t[row] - _dot(A[row], x, n)
-        _level_step(Mw[r0 : r0 + mk], mk, r, rhs, 0.0, u, G)
+        if mk == r:
+            _forward(Mw[r0 : r0 + mk], r, rhs, u)
+        else:
+            _ls_apply(Gs[s], gts[s], mk, r, rhs, u, y)
         for i in range(r):
             ui = u[i]
             for col in range(n):
@@ -304,8 +391,10 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
     def _multipliers(A, act, lstart, below, g, ws, mu, h, rhs):  # pragma: no cover - compiled
         """``mu[slot]``: the basic multipliers of the active rows of the sub-levels
         ``< below`` for the gradient ``g``."""
-        Yt, _, _, cs, Mw, piv, _, ranks, _, _, _, _, _ = ws
+        Yt, _, _, cs, Mw, piv, _, ranks, _, _, _, _, _, _, _, pend, _ = ws
         n = A.shape[1]
+        if 0 <= pend[0] < below:
+            _complete(ws, lstart, n)
         for col in range(n):
             h[col] = g[col]
         for k in range(below - 1, -1, -1):
@@ -480,7 +569,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
 
     @kernel(fast=True)
     def _solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter,
-               budget, x_out, res, ranks_out, fro, info):  # pragma: no cover  # fmt: skip
+               budget, x_out, res, ranks_out, fro, info, wf, wi):  # pragma: no cover  # fmt: skip
         clock = np.zeros(2, dtype=np.int64)
         start = _cpu_time(clock)
         m, n = A.shape
@@ -543,6 +632,17 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 status[i] = 0
             if status[i] == 0 or attach[i] < level_of[i] or attach[i] > p:
                 attach[i] = level_of[i]
+        # each row's nonzero columns (the sparse rows' products skip the zeros)
+        nzp = np.zeros(m + 1, dtype=np.int64)
+        nzi = wi[: max(m * n, 1)]
+        q = 0
+        for i in range(m):
+            nzp[i] = q
+            for col in range(n):
+                if A[i, col] != 0.0:
+                    nzi[q] = col
+                    q += 1
+        nzp[m] = q
         undamped = True
         lam_sub = np.zeros(ns)
         for k in range(p):
@@ -558,7 +658,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         phis = np.zeros(ns)
         ws = (
             np.empty((n, n)),  # Yt: a row per direction, the last ones Z^T
-            np.empty((ns, n, n)),  # Ysave: Yt's rows left before each sub-level
+            wf[: ns * n * n].reshape((ns, n, n)),  # Ysave: Yt's rows before each sub-level
             np.empty((ns + 1, n)),  # xs: the point before each sub-level
             np.zeros(ns + 1, dtype=np.int64),  # cs: first basis row of each sub-level
             np.empty((max(m, 1), n)),  # Mw: each sub-level's factored rows
@@ -568,8 +668,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             np.zeros(n),  # x of the recursion
             np.empty(max(m, 1)),  # e
             np.empty(n),  # u
-            np.empty((n + 1, m + n)),  # G
+            wf[ns * n * n : ns * n * n + ns * (n + 1) * (m + n)].reshape((ns, n + 1, m + n)),
+            np.empty((ns, n + 1)),  # gts
             np.empty(max(m, n)),  # w
+            np.empty(m + n),  # y
+            np.full(2, -1, dtype=np.int64),  # pend: the sub-level whose basis waits, twice
+            np.full(ns + 1, -1, dtype=np.int64),  # sv: where the basis at each start is saved
         )
         xs = ws[2]
         sub_ranks = ws[7]
@@ -591,11 +695,14 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         # the first phase starts at the eHQP point of the previous call's active rows
         _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
                 t, phis)  # fmt: skip
-        _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws)
+        _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws, nzp, nzi)
         its = 1
         for col in range(n):
             x[col] = xs[ns, col]
         stale = False
+        # x is the recursion's point of the current active rows, nothing changed since:
+        # every phase's target is x itself (the usual tick: the guess was right)
+        at_ehqp = True
         dirty = ns  # the first sub-level whose rows changed since the last eHQP
         for j in range(p + 1):
             upto = 2 * j + 2 if j < p else ns
@@ -623,10 +730,11 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         break
                     _gather(A, starts, kind, status, attach, level_of, lo, up, fro,
                                    dirty, act, slot, lstart, t, phis)  # fmt: skip
-                    _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, ws)
+                    _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, ws, nzp, nzi)
                     its += 1
                     longest = max(longest, _cpu_time(clock) - now)
                     stale = False
+                    at_ehqp = False
                     dirty = ns
                 # held rows that depend on the rows above them leave
                 s = 2 * j
@@ -640,7 +748,14 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     stale = True
                     continue
                 # the phase's target (see _activeset)
-                if j < p and lam_sub[2 * j + 1] != 0.0:  # damped: the recursion's point
+                if at_ehqp:
+                    for col in range(n):
+                        xj[col] = xs[2 * j + 2, col] if j < p else x[col]
+                        xp[col] = x[col]
+                    if j < p and lam_sub[2 * j + 1] == 0.0:
+                        for col in range(n):
+                            xj[col] = x[col]
+                elif j < p and lam_sub[2 * j + 1] != 0.0:  # damped: the recursion's point
                     for col in range(n):
                         xj[col] = xs[2 * j + 2, col]
                         xp[col] = xj[col]
@@ -659,7 +774,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         xj[col] = xs[ns, col]
                         xp[col] = xs[ns, col]
                 blocked = False
-                for part in range(2):
+                for part in range(0 if at_ehqp else 2):
                     hold = j + part
                     for col in range(n):
                         d[col] = (xj[col] if part == 0 else xp[col]) - x[col]
@@ -743,7 +858,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             # <= solved that it would leave
             _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
                     t, phis)  # fmt: skip
-            _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws)
+            _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws, nzp, nzi)
             its += 1
             for col in range(n):
                 d[col] = xs[ns, col] - x[col]
@@ -777,8 +892,21 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         info[1] = reason
         info[2] = solved
         info[6] = nin
+        ninq = 0
+        for i in range(m):
+            if kind[i] == INEQ:
+                ninq += 1
+        info[7] = ninq
 
     solve = _solve
+
+
+def workspace(m: int, n: int, p: int) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's large scratch arrays for ``m`` rows, ``n`` variables and ``p`` levels
+    (kept by the solver per stack shape: no allocation, no page touched anew per call):
+    the saved bases and the least-squares factors (floats), the rows' nonzero columns."""
+    ns = 2 * p + 1
+    return np.empty(ns * n * n + ns * (n + 1) * (m + n)), np.empty(max(m * n, 1), dtype=np.int64)
 
 
 def warm_up() -> None:
@@ -794,7 +922,7 @@ def warm_up() -> None:
     status = np.zeros(n, dtype=np.int8)
     attach = np.zeros(n, dtype=np.int64)
     out = (np.empty(n), np.empty(2), np.empty(2, dtype=np.int64), np.empty(2))
-    info = np.empty(7, dtype=np.int64)
+    info = np.empty(8, dtype=np.int64)
     _solve(A, lo, up, starts, status, attach, np.zeros(2), 1e-9, 1e-9, 1e-9, 10, math.inf,
-           *out, info)  # fmt: skip
+           *out, info, *workspace(n, n, 2))  # fmt: skip
     _solve.disable_compile()

@@ -118,9 +118,11 @@ class HierarchyResult:
     """
 
     __slots__ = (
+        "_active",
         "_eps",
         "_fro",
-        "active",
+        "_starts",
+        "_status",
         "iterations",
         "method",
         "ranks",
@@ -138,16 +140,27 @@ class HierarchyResult:
         self.status = status
         self.solved = solved
         self.iterations = iterations
-        self.active = active
+        self._status, self._starts = active  # the statuses: `active` is made when read
+        self._active = None
         self.method = method
         self.xnorm = math.sqrt(float(x @ x))
         self._fro = fro
         self._eps = eps
 
     @property
+    def active(self) -> tuple[np.ndarray, ...]:
+        """Per level, the indices (in the level) of its inequality rows held at a bound."""
+        if self._active is None:
+            held = np.flatnonzero(self._status)
+            self._active = tuple(
+                held[(held >= s) & (held < e)] - s for s, e in pairwise(self._starts)
+            )
+        return self._active
+
+    @property
     def n_active(self) -> int:
         """The number of inequality rows held at a bound, over every level."""
-        return sum(len(a) for a in self.active)
+        return int(np.count_nonzero(self._status))
 
     @property
     def converged(self) -> bool:
@@ -212,7 +225,7 @@ class _Buffers:
 
     __slots__ = (
         "A", "attach", "fro", "info", "lo", "ranks", "res", "sizes", "starts", "status", "up",
-        "warm", "x",
+        "warm", "wf", "wi", "x",
     )  # fmt: skip
 
     def __init__(self, sizes: tuple[int, ...], n: int) -> None:
@@ -230,8 +243,9 @@ class _Buffers:
         self.res = np.zeros(len(sizes))
         self.ranks = np.zeros(len(sizes), dtype=np.int64)
         self.fro = np.zeros(len(sizes))
-        self.info = np.zeros(7, dtype=np.int64)
+        self.info = np.zeros(8, dtype=np.int64)
         self.warm = False  # whether status, attach and x hold a previous call's answer
+        self.wf = self.wi = None  # the compiled kernel's scratch (made at its first call)
 
 
 class HierarchySolver:
@@ -396,8 +410,10 @@ class HierarchySolver:
                 self.eps, self.dual_tol, self._max_iter, budget, buf.x, buf.res, buf.ranks,
                 buf.fro, buf.info)  # fmt: skip
         if self.jit:
+            if buf.wf is None:
+                buf.wf, buf.wi = _activeset_jit.workspace(buf.A.shape[0], buf.A.shape[1], p)
             try:
-                _activeset_jit.solve(*args)
+                _activeset_jit.solve(*args, buf.wf, buf.wi)
             except TypeError as exc:  # types the kernel was not compiled for: NumPy
                 self.jit = False
                 _jit.refused("HierarchySolver", exc)
@@ -411,10 +427,9 @@ class HierarchySolver:
             self._raise(buf, parsed, pair)
         buf.warm = True
         its, reason = int(info[0]), int(info[1])
-        held = np.flatnonzero(buf.status)
-        active = tuple(held[(held >= s) & (held < e)] - s for s, e in pairwise(buf.starts))
+        active = (buf.status.copy(), buf.starts)
         solved = min(int(info[2]), p)
-        eq = bool(np.array_equal(buf.lo, buf.up))
+        eq = int(info[7]) == 0
         return HierarchyResult(
             buf.x.copy(), buf.res.copy(), buf.ranks.copy(), _STATUS[reason], solved, its,
             active, "equality" if eq else "active-set", buf.fro.copy(), self.eps,
@@ -515,8 +530,16 @@ def solve_hierarchy(
     return solver.solve(levels, damping)
 
 
+_ZEROS: dict[int, np.ndarray] = {}
+
+
 def _dampings(damping, p: int) -> np.ndarray:
     """One damping per level, each finite and >= 0."""
+    if type(damping) is float and damping == 0.0:  # the usual call: undamped
+        z = _ZEROS.get(p)
+        if z is None:
+            z = _ZEROS[p] = np.zeros(p)
+        return z
     if isinstance(damping, (int, float, np.floating, np.integer)) and not isinstance(damping, bool):
         v = float(damping)
         _check_damping(v)
