@@ -120,7 +120,8 @@ def test_compare_reports_every_contender(bench_sot, monkeypatch):
     assert all(len(c.episodes) == 2 for c in contenders.values())
     assert all(len(e.tick) == 3 for c in contenders.values() for e in c.episodes)
     table = bench_sot.compare_table(result)
-    assert table.count("\n| sotpy") == 3
+    assert table.count("\n| sotpy") == 4
+    assert not contenders[bench_sot.TUTORIAL].failure  # the tutorial's graph ran
     # the same stack read through the task signals gives the same episode
     fused, plain = (
         contenders[k].episodes[0] for k in ("sotpy", "sotpy, tasks through their signals")
@@ -129,6 +130,7 @@ def test_compare_reports_every_contender(bench_sot, monkeypatch):
     if result["pink"]:
         assert result["fastest"] in contenders and len(result["ratios"]) == 2
         assert f"sotpy / {result['fastest']}" in table
+        assert len(result["tutorial_ratios"]) == 2 and f"{bench_sot.TUTORIAL} / " in table
         # every installed back-end was screened, the fastest two compared
         screening = result["screening"]
         assert {r["solver"] for r in screening} == set(bench_sot.pink_solvers())
@@ -144,6 +146,7 @@ def test_compare_reports_every_contender(bench_sot, monkeypatch):
         "sotpy",
         "sotpy, feet/feet/CoM on 3 levels",
         "sotpy, tasks through their signals",
+        bench_sot.TUTORIAL,
     ]
     assert result["fastest"] is None and result["ratios"] == []
     assert "Pink skipped" in bench_sot.compare_table(result)

@@ -108,9 +108,6 @@ class HierarchyResult:
             optimal, the minimum-norm criterion was not finished).
         iterations: equality-hierarchy solves of the call (1 when the previous active
             set was right).
-        active: per level, the indices (in the level) of its inequality rows held at a
-            bound at ``x`` (at the bound, or beyond it when the level cannot meet them);
-            :attr:`n_active` counts them.
         method: ``"equality"`` (every row an equality) or ``"active-set"``.
         tolerances: threshold of :attr:`satisfied`,
             ``10 * eps * (1 + ||A_k||_F ||x||)`` per level.
@@ -149,7 +146,9 @@ class HierarchyResult:
 
     @property
     def active(self) -> tuple[np.ndarray, ...]:
-        """Per level, the indices (in the level) of its inequality rows held at a bound."""
+        """Per level, the indices (in the level) of its inequality rows held at a bound at
+        ``x`` (at the bound, or beyond it when the level cannot meet them); :attr:`n_active`
+        counts them."""
         if self._active is None:
             held = np.flatnonzero(self._status)
             self._active = tuple(
