@@ -1,5 +1,5 @@
 """Fused plan steps (``OutputSignal.setPlanFusion``) and the SOT's fused evaluation of
-its equality tasks (``SOT.setTaskFusion``).
+its tasks (``SOT.setTaskFusion``), equality and inequality.
 
 Graph level: a fused output is computed by one step over the sources its hook gives,
 the signals in between are left out of the plan and still computed when read, the hook
@@ -588,10 +588,12 @@ def test_mixed_stack_with_inequalities_and_unfused_tasks():
     tick_both(on, off, 20)
     steps = on.device._controlPlan.steps
     ineq, left, right, big, posture = on.tasks
-    # read through their signals: the inequality, the task with the feed-forward
-    for s in (ineq.jacobian, ineq.lower, ineq.upper, right.jacobian, right.task):
+    # read through its signals: the task with the feed-forward
+    for s in (right.jacobian, right.task):
         assert s in steps, s.name
-    # fused: the others
+    # fused: the others, the inequality task too
+    for s in (ineq.jacobian, ineq.lower, ineq.upper):
+        assert s not in steps, s.name
     for t in (left, big, posture):
         assert t.task not in steps and t.jacobian not in steps, t.name
     # the buffer grew to hold the fused rows (3 + 150 + 26)
@@ -753,3 +755,71 @@ def test_limit_rows_kernel_is_the_limit_level_bit_for_bit():
         assert lo2[0] == lo2[1] == lo2[-1] == 7.0  # nothing written outside its rows
         if trial == 0:
             assert np.isnan(lo).any()
+
+
+# -- the tutorial's graph: an inequality task (feet + balance polygon) fused ----------------
+def tutorial_pair(bench_sot, scenes, margin: float = 0.01):
+    """The graph of docs/tutorial-reach.md twice, fusion on and off, with the balance
+    polygon shrunk by ``margin`` (m); no time budget (bit-for-bit comparisons)."""
+    scene = scenes("talos")
+    pair = []
+    for p in (ON, OFF):
+        c = bench_sot.build_sotpy_tutorial(scene, prefix=p)
+        contact = c.tasks[0]
+        if margin != 0.01:
+            sup = np.asarray(contact.referenceSup.value).copy()
+            sup[12:] -= margin - 0.01
+            contact.referenceSup.value = sup
+        c.sot.setTimeBudget(None)
+        pair.append(c)
+    pair[1].sot.setTaskFusion(False)
+    return pair
+
+
+def _max_diff(on, off, ticks):
+    worst = 0.0
+    active = 0
+    for _ in range(ticks):
+        on.device.increment(DT)
+        off.device.increment(DT)
+        worst = max(worst, float(np.abs(on.sot.lastResult.x - off.sot.lastResult.x).max()))
+        active = max(active, len(on.sot.lastResult.active[1]))
+    return worst, active
+
+
+@needs_kernels
+@pytest.mark.parametrize("margin", [0.01, 0.09])
+def test_fused_inequality_task_gives_the_control_of_its_signals(bench_sot, scenes, margin):
+    """The tutorial's contact task (feet equalities and balance inequalities in one
+    TaskInequality) written straight into the solver's rows gives the control of the
+    same graph read through its signals, with the balance rows inactive (1 cm margin)
+    and active (9 cm: the CoM starts at the shrunk polygon); the fused plan skips the
+    task's lower/upper/jacobian signals."""
+    on, off = tutorial_pair(bench_sot, scenes, margin)
+    worst, active = _max_diff(on, off, 300)
+    assert worst < 1e-10  # the same arithmetic but for the rounding of the rows' writers
+    assert (active > 0) == (margin > 0.05)  # the balance rows were held in the 9 cm case
+    contact = on.tasks[0]
+    steps = on.device._controlPlan.steps
+    for s in (contact.jacobian, contact.lower, contact.upper):
+        assert s not in steps, s.name
+    assert on.sot._inPlace is not None  # written into the solver's buffers
+
+
+@needs_kernels
+def test_fused_inequality_task_declines_bad_bounds_and_the_signals_name_them(bench_sot, scenes):
+    """A referenceSup of the wrong size: the writer declines, the task's signal raises
+    the same named error as the unfused graph's; fixed, both run on, fused."""
+    on, off = tutorial_pair(bench_sot, scenes)
+    _max_diff(on, off, 3)
+    errors = {}
+    for c, p in ((on, ON), (off, OFF)):
+        good = np.asarray(c.tasks[0].referenceSup.value).copy()
+        c.tasks[0].referenceSup.value = good[:5]
+        with pytest.raises(SotpyError) as info:
+            c.device.increment(DT)
+        errors[p] = same_name(str(info.value))
+        c.tasks[0].referenceSup.value = good
+    assert errors[ON] == errors[OFF] and "referenceSup" in errors[ON]
+    worst, _ = _max_diff(on, off, 5)
+    assert worst < 1e-10 and on.sot.getTaskFusion()

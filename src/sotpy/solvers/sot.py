@@ -157,6 +157,7 @@ class SOT(Entity):
         self._nv = nv
         self._rowsA = np.empty((64, nv))  # the fused tasks' rows (see _fusion)
         self._rowsB = np.empty(64)
+        self._rowsU = np.empty(64)  # the fused inequality tasks' upper bounds
         self._inPlace = None
 
     @command
@@ -502,10 +503,12 @@ class SOT(Entity):
     # -- fused evaluation of the tasks ------------------------------------------------
     def _fusion(self) -> tuple[tuple[Any, ...], Any] | None:
         """The plan's evaluation of ``control`` (see
-        :meth:`~sotpy.graph.signal.OutputSignal.setPlanFusion`): each equality task
-        that has a row writer (:mod:`sotpy.tasks.rows`) is read from its features'
-        inputs and written straight into the rows handed to the solver; the other
-        tasks through their signals. None (the usual step) when no task has a writer."""
+        :meth:`~sotpy.graph.signal.OutputSignal.setPlanFusion`): each task that has a
+        row writer (:mod:`sotpy.tasks.rows`; an equality task's writes ``J`` and
+        ``-lambda e``, an inequality task's ``J`` and both bounds) is read from its
+        features' inputs and written straight into the rows handed to the solver; the
+        other tasks through their signals. None (the usual step) when no task has a
+        writer."""
         if not computedByOwnCallback(self.control, SOT.control.fn):
             return None
         sources: list[Any] = self._headDeps()
@@ -514,7 +517,7 @@ class SOT(Entity):
         plan: list[tuple[TaskAbstract, Any, int]] = []
         fused = False
         for t in self._stack:
-            w = None if t.isInequality else t._rowWriter()  # type: ignore[attr-defined]
+            w = t._rowWriter()  # type: ignore[attr-defined]
             if w is None:
                 deps = [t.jacobian, *((t.lower, t.upper) if t.isInequality else (t.task,))]  # type: ignore[attr-defined]
                 plan.append((t, None, len(deps)))
@@ -544,6 +547,7 @@ class SOT(Entity):
                 A = self._rowsA
                 self._rowsA = np.empty((2 * A.shape[0], self.nv))
                 self._rowsB = np.empty(2 * A.shape[0])
+                self._rowsU = np.empty(2 * A.shape[0])
             except TypeError as exc:
                 # a kernel refused its arguments (types it was not compiled for) or a
                 # callback failed: the signals decide, and raise if they fail too
@@ -616,6 +620,13 @@ class SOT(Entity):
                 except (TypeError, ValueError):
                     return None
                 general = general or task.isInequality
+            elif task.isInequality:  # J, lower and upper
+                try:
+                    if write(values, o, A, lo, up, s) != e - s:
+                        return None
+                except BufferFull:
+                    return None
+                general = True
             else:
                 try:
                     if write(values, o, A, lo, s, 0.0) != e - s:
@@ -640,10 +651,11 @@ class SOT(Entity):
         nv = self.nv
         levels, lams, damping = self._head(iter(values[:head]))
         overrides = self._taskDamping
-        A, b = self._rowsA, self._rowsB
+        A, b, u = self._rowsA, self._rowsB, self._rowsU
         r = 0
         o = head
         ndarray = np.ndarray
+        targets = 0.0  # the equality targets' sum of squares
         for task, write, n in plan:
             if write is None:
                 J = values[o]
@@ -654,18 +666,25 @@ class SOT(Entity):
                 else:
                     levels.append((J, values[o + 1], values[o + 1]))
             else:
-                k = write(values, o, A, b, r, 0.0)
+                if task.isInequality:  # its writer checks its bounds
+                    k = write(values, o, A, b, u, r)
+                else:
+                    k = write(values, o, A, b, r, 0.0)
                 if k < 0:
                     return None, []
                 Ak, bk = A[r : r + k], b[r : r + k]
-                levels.append((Ak, bk, bk))
+                if task.isInequality:
+                    levels.append((Ak, bk, u[r : r + k]))
+                else:
+                    levels.append((Ak, bk, bk))
+                    targets += float(bk.dot(bk))
                 r += k
             o += n
             lams.append(overrides.get(task.name, damping) if overrides else damping)
         if r:
-            Ar, br = A[:r], b[:r]
+            Ar = A[:r]
             # finite iff the sums of squares are (an overflow: the signals decide)
-            if not (math.isfinite(np.vdot(Ar, Ar)) and math.isfinite(br.dot(br))):
+            if not (math.isfinite(np.vdot(Ar, Ar)) and math.isfinite(targets)):
                 return None, []
         return levels, lams
 

@@ -410,6 +410,93 @@ class TaskInequality(TaskAbstract):
         self.lower.setDependencies(deps)
         self.upper.setDependencies(deps)
 
+    def _rowWriter(self) -> RowWriter | None:
+        """How an SOT writes this task's rows (``J``, ``lower``, ``upper``) straight into
+        its buffers, from its features' inputs (see :mod:`sotpy.tasks.rows`; the write
+        takes both bound buffers: ``write(values, o, A, lower, upper, r)``); None when
+        it must read ``jacobian``, ``lower`` and ``upper`` (a derivative feed-forward, an
+        output set to a constant or given another callback, a feature without a
+        writer). Anything out of the ordinary (a gain or period out of range, bounds of
+        the wrong size, an overflow) makes the write answer -1: the SOT then reads the
+        signals, whose callbacks name the error."""
+        if (
+            self._withDerivative
+            or not self._features
+            or not computedByOwnCallback(self.error, TaskAbstract.error.fn)
+            or not computedByOwnCallback(self.jacobian, TaskAbstract.jacobian.fn)
+            or not computedByOwnCallback(self.lower, TaskInequality.lower.fn)
+            or not computedByOwnCallback(self.upper, TaskInequality.upper.fn)
+        ):
+            return None
+        parts: list[tuple[Any, int]] = []
+        sources: list[Any] = [
+            self.controlSelec, self.referenceInf, self.referenceSup, self.controlGain, self.dt,
+        ]  # fmt: skip
+        for f in self._features:
+            w = f._rowWriter()
+            if w is None:
+                return None
+            parts.append((w.write, len(w)))
+            sources += w.sources
+        isfinite = math.isfinite
+        inf_, ninf = math.inf, -math.inf
+
+        def write(v: Any, o: int, A: np.ndarray, lo: np.ndarray, up: np.ndarray, r: int) -> int:
+            selec, rinf, rsup, k, dt = v[o : o + 5]
+            if type(k) is not float or type(dt) is not float or not (0.0 < k < inf_):
+                return -1
+            if not 0.0 < dt < inf_:
+                return -1
+            c = k / dt
+            if not isfinite(c):
+                return -1
+            o += 5
+            r0 = r
+            for fn, n in parts:  # J and -c e (the features' rows with the gain c)
+                kk = fn(v, o, A, lo, r, c)
+                if kk < 0:
+                    return -1
+                r += kk
+                o += n
+            m = r - r0
+            b = lo[r0:r]
+            for ref in (rinf, rsup):
+                if type(ref) is not np.ndarray or ref.shape[0] not in (0, m):
+                    return -1
+            if (rinf.shape[0] and not (rinf < inf_).all()) or (
+                rsup.shape[0] and not (rsup > ninf).all()
+            ):
+                return -1
+            if rinf.shape[0] and rsup.shape[0] and (rinf > rsup).any():
+                return -1
+            u = up[r0:r]
+            if rsup.shape[0]:
+                np.multiply(rsup, c, out=u)
+                u += b
+            else:
+                u.fill(inf_)
+            if rinf.shape[0]:
+                t = rinf * c
+                np.add(t, b, out=b)
+            else:
+                b.fill(ninf)
+            # a finite reference gives a finite bound (else the callback refuses it)
+            for ref, out in ((rinf, b), (rsup, u)):
+                if ref.shape[0] and not np.array_equal(np.isfinite(ref), np.isfinite(out)):
+                    return -1
+            n = A.shape[1]
+            cols = selec._cache.get(n, _MISSING)
+            if cols is _MISSING:
+                try:
+                    cols = selec.rows(n)
+                except ValueError:
+                    return -1
+            if cols is not None:
+                A[r0:r] *= selec.mask(n)
+            return m
+
+        return RowWriter(sources, write)
+
     def _bounds(
         self,
         inf: np.ndarray,
