@@ -122,6 +122,9 @@ OPTIMAL, ITERATIONS, TIME = 0, 1, 2
 OK, NONFINITE_MATRIX, NAN_BOUND, CROSSED_BOUNDS, INFINITE_EQUALITY, NONFINITE_RESULT = range(6)
 #: row kinds
 EQ, INEQ, FREE = 0, 1, 2
+#: how often a row may be released in one call (a bound against cycles through several
+#: rows, where the multipliers of degenerate vertices disagree with the steps)
+MAX_RELEASES = 3
 #: a list to record the iteration's events in (tests and debugging), or None
 TRACE: list | None = None
 
@@ -296,6 +299,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
 
     decided = np.zeros(m, dtype=bool)
     locked = np.zeros(m, dtype=bool)
+    releases = np.zeros(m, dtype=np.int64)
     longest = 0.0
     reason = OPTIMAL
     solved = p + 1
@@ -379,6 +383,8 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                     x = target
                     continue
                 x = x + tau * (target - x)
+                if hold > j and status[i] != 0 and attach[i] == hold:
+                    break  # already held for the level below (a dependent row): no look-ahead
                 if i == released and tau == 0.0:
                     locked[i] = True  # released and blocked at once: not again ...
                 else:
@@ -401,8 +407,8 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
             if blocked:
                 continue
             if j == p:
-                verdict = _verify(A, x, t, e, status, attach, decided, locked, level_of, anorm,
-                                  lam_sub, fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
+                verdict = _verify(A, x, t, e, status, attach, decided, locked, releases, level_of,
+                                  anorm, lam_sub, fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
                 if TRACE is not None:
                     TRACE.append(("verify", j, verdict))
                 if verdict is True:
@@ -433,8 +439,8 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                         TRACE.append(("inside", j, [int(i) for i in own[inside]]))
                     stale = True
                     continue
-            verdict = _verify(A, x, t, e, status, attach, decided, locked, level_of, anorm, lam_sub,
-                              fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
+            verdict = _verify(A, x, t, e, status, attach, decided, locked, releases, level_of,
+                              anorm, lam_sub, fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
             if TRACE is not None:
                 TRACE.append(("verify", j, verdict))
             if verdict is True:
@@ -456,8 +462,8 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     _finish(A, lo, up, starts, x, e, status, ineq, its, reason, solved, x_out, res, ranks, info)
 
 
-def _verify(A, x, t, e, status, attach, decided, locked, level_of, anorm, lam_sub, fro, ineq,
-            j, p, eps, dual_tol, xj):  # fmt: skip
+def _verify(A, x, t, e, status, attach, decided, locked, releases, level_of, anorm, lam_sub,
+            fro, ineq, j, p, eps, dual_tol, xj):  # fmt: skip
     """Phase ``j``'s multipliers judge the met active rows above ``own_j`` that no phase
     above decided: True when none is wrong (those with a significant multiplier are then
     decided, pinned for the phases below), else the row released."""
@@ -491,13 +497,14 @@ def _verify(A, x, t, e, status, attach, decided, locked, level_of, anorm, lam_su
     mu = _multipliers(A, g, below, e, len(w))
     li = mu[cand] * anorm[cand] / gscale
     sig = np.abs(li) > dual_tol
-    wrong = cand[sig & (status[cand] * li < 0) & ~locked[cand]]
+    wrong = cand[sig & (status[cand] * li < 0) & ~locked[cand] & (releases[cand] < MAX_RELEASES)]
     if len(wrong) == 0:
         # the phase is done: the rows it kept are pinned for the phases below
         decided[cand[sig & (status[cand] * li > 0)]] = True
         return True
     i = int(wrong[np.argmax(np.abs(li[np.isin(cand, wrong)]))])
     status[i] = 0
+    releases[i] += 1
     return i
 
 

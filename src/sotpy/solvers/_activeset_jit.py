@@ -35,6 +35,7 @@ from ._activeset import (
     INEQ,
     INFINITE_EQUALITY,
     ITERATIONS,
+    MAX_RELEASES,
     NAN_BOUND,
     NONFINITE_MATRIX,
     NONFINITE_RESULT,
@@ -492,7 +493,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         return tau, blk, side
 
     @kernel(fast=True)
-    def _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of, decided, locked,
+    def _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of, decided, locked, releases,
                 anorm, lam_sub, fro, j, p, eps, dual_tol, ws, mu, h, g, rhs, score,
                 cand):  # pragma: no cover - compiled  # fmt: skip
         """As ``_verify`` of :mod:`._activeset`: -1 when no judged row is wrong (the kept
@@ -555,11 +556,13 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             i = act[q]
             li = mu[q] * anorm[i] / gscale
             score[k] = li
-            if abs(li) > dual_tol and status[i] * li < 0.0 and not locked[i] and abs(li) > bs:
+            free = not locked[i] and releases[i] < MAX_RELEASES
+            if abs(li) > dual_tol and status[i] * li < 0.0 and free and abs(li) > bs:
                 bs = abs(li)
                 best = i
         if best >= 0:
             status[best] = 0
+            releases[best] += 1
             return best
         for k in range(nc):
             i = act[cand[k]]
@@ -689,6 +692,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         cand = np.zeros(max(m, 1), dtype=np.int64)
         decided = np.zeros(max(m, 1), dtype=np.bool_)
         locked = np.zeros(max(m, 1), dtype=np.bool_)
+        releases = np.zeros(max(m, 1), dtype=np.int64)
         longest = 0.0
         reason = OPTIMAL
         solved = p + 1
@@ -784,6 +788,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         x[col] += tau * d[col]
                     if i < 0:
                         continue
+                    if part == 1 and status[i] != 0 and attach[i] == hold:
+                        break  # already held for the level below (dependent): no look-ahead
                     if i == released and tau == 0.0:
                         locked[i] = True  # released and blocked at once: not again ...
                     else:
@@ -842,8 +848,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         stale = True
                         continue
                 verdict = _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of,
-                                  decided, locked, anorm, lam_sub, fro, j, p, eps, dual_tol, ws,
-                                  mu, h, g, rhs, score, cand)  # fmt: skip
+                                  decided, locked, releases, anorm, lam_sub, fro, j, p, eps,
+                                  dual_tol, ws, mu, h, g, rhs, score, cand)  # fmt: skip
                 if verdict < 0:
                     break
                 released = verdict

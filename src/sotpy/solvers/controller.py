@@ -48,9 +48,22 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics.types import SE3
-from ..errors import EntityError, SotpyError, SotpyWarning
-from ..graph import BOOL, DOUBLE, INT, VECTOR, Entity, Input, Output, OutputSignal, command, plug
+from ..errors import BudgetWarning, EntityError, SotpyError, SotpyWarning
+from ..graph import (
+    BOOL,
+    DOUBLE,
+    INT,
+    VECTOR,
+    Entity,
+    Input,
+    Output,
+    OutputSignal,
+    command,
+    plug,
+    pool,
+)
 from ..graph.signal import InputSignal
+from .hierarchy import checked_max_iter, checked_time_budget
 from .wbc import (
     BilateralContactSpec,
     CartesianAccelerationTask,
@@ -130,7 +143,50 @@ class Controller(Entity):
                 )
         else:
             self._warned = False
+        if sol.budget_hit:  # the hierarchical strategy stopped at its budget
+            self.budgetHits += 1
+            pool.budgetHits += 1
+            if not self._budgetWarned:
+                self._budgetWarned = True
+                res = self.core.last_hierarchy
+                warnings.warn(
+                    f"{self.className}({self.name}): the hierarchical solver stopped at its"
+                    f" {res.status} budget at tick {t}: {res.reason}. Said once until it"
+                    " converges again; budgetHits and the loop's stats count every such tick",
+                    BudgetWarning,
+                    stacklevel=2,
+                )
+        elif self._budgetWarned:
+            self._budgetWarned = False
         return sol.chi.copy()
+
+    @command
+    def setTimeBudget(self, seconds: float | None) -> None:
+        """The hierarchical strategy's time budget per tick (s of the ticking thread's CPU
+        time; finite, > 0; ``None`` from Python: none). A tick that reaches it keeps the
+        levels it proved (see ``docs/solvers.md``); the weighted strategy has no budget."""
+        h = self.core.hierarchy
+        h.time_budget = checked_time_budget(
+            f"{self.className}({self.name}).setTimeBudget", seconds, h.time_budget
+        )
+
+    @command
+    def getTimeBudget(self) -> float | None:
+        """The hierarchical strategy's time budget per tick (s; ``None``: none)."""
+        return self.core.hierarchy.time_budget
+
+    @command
+    def setMaxIterations(self, n: int) -> None:
+        """The hierarchical strategy's iteration budget per tick (>= 1)."""
+        h = self.core.hierarchy
+        h.max_iter = checked_max_iter(
+            f"{self.className}({self.name}).setMaxIterations", n, h.max_iter
+        )
+
+    @command
+    def getMaxIterations(self) -> int:
+        """The hierarchical strategy's iteration budget per tick."""
+        return self.core.hierarchy.max_iter
 
     @Output(VECTOR, deps=("solution",), doc="torque command tau (na, N m), minus removed terms")
     def torque(self, _chi: np.ndarray) -> np.ndarray:
@@ -187,6 +243,9 @@ class Controller(Entity):
             np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), False, "not solved yet"
         )
         self._warned = False
+        self._budgetWarned = False
+        #: ticks whose hierarchical solve stopped at its iteration or time budget
+        self.budgetHits = 0
         self._removeGravity = False
         self._removeCoriolis = False
         self._inputTasks: list[Task] = []

@@ -65,7 +65,7 @@ import numpy as np
 
 from sotpy import _jit
 from sotpy._blas import limit_blas_threads
-from sotpy.errors import SolverError
+from sotpy.errors import CommandError, SolverError
 
 from . import _activeset, _activeset_jit
 
@@ -509,6 +509,34 @@ class HierarchySolver:
         _raise_nonfinite_matrix(parsed)
         _raise_bad_bounds(parsed)
         raise SolverError(f"solve_hierarchy: input refused (code {code})")  # pragma: no cover
+
+
+def checked_time_budget(who: str, seconds: float | None, now: float | None) -> float | None:
+    """``seconds`` as an entity's time budget (finite, > 0, or ``None``: none), else a
+    :class:`~sotpy.errors.CommandError` naming ``who`` (``"SOT(sot).setTimeBudget"``)
+    and the budget it keeps (``now``)."""
+    if seconds is None:
+        return None
+    ok = isinstance(seconds, (int, float, np.floating, np.integer)) and not isinstance(
+        seconds, bool
+    )
+    if not (ok and math.isfinite(seconds) and seconds > 0.0):
+        raise CommandError(
+            f"{who}: the time budget must be a finite number of seconds > 0, got"
+            f" {seconds!r}; the budget is unchanged ({now})"
+        )
+    return float(seconds)
+
+
+def checked_max_iter(who: str, n: int, now: int) -> int:
+    """``n`` as an entity's iteration budget (an integer >= 1), else a
+    :class:`~sotpy.errors.CommandError` naming ``who`` and the budget it keeps."""
+    if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
+        raise CommandError(
+            f"{who}: the iteration budget must be an integer >= 1, got {n!r}; the budget is"
+            f" unchanged ({now})"
+        )
+    return int(n)
 
 
 def solve_hierarchy(

@@ -70,7 +70,7 @@ from ..graph.pool import pool
 from ..tasks import _rowkernels
 from ..tasks.rows import BufferFull, computedByOwnCallback
 from ..tasks.task import TaskAbstract
-from .hierarchy import HierarchySolver
+from .hierarchy import HierarchySolver, checked_max_iter, checked_time_budget
 
 __all__ = ["SOT"]
 
@@ -341,17 +341,10 @@ class SOT(Entity):
         """The solver's time budget per tick, in seconds of the ticking thread's CPU time
         (finite, > 0; ``None`` from Python: no time budget, for offline runs). A tick that
         reaches it returns the best control proven so far (see ``docs/solvers.md``)."""
-        if seconds is not None:
-            ok = isinstance(seconds, (int, float, np.floating, np.integer)) and not isinstance(
-                seconds, bool
-            )
-            if not (ok and math.isfinite(seconds) and seconds > 0.0):
-                raise CommandError(
-                    f"SOT({self.name}).setTimeBudget: the time budget must be a finite number"
-                    f" of seconds > 0, got {seconds!r}; the budget is unchanged"
-                    f" ({self._solver.time_budget})"
-                )
-        self._solver.time_budget = seconds
+        now = self._solver.time_budget
+        self._solver.time_budget = checked_time_budget(
+            f"SOT({self.name}).setTimeBudget", seconds, now
+        )
         self.control.setReady()
 
     @command
@@ -362,12 +355,8 @@ class SOT(Entity):
     @command
     def setMaxIterations(self, n: int) -> None:
         """The solver's iteration budget per tick (equality-hierarchy solves, >= 1)."""
-        if not (isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1):
-            raise CommandError(
-                f"SOT({self.name}).setMaxIterations: the iteration budget must be an integer"
-                f" >= 1, got {n!r}; the budget is unchanged ({self._solver.max_iter})"
-            )
-        self._solver.max_iter = int(n)
+        now = self._solver.max_iter
+        self._solver.max_iter = checked_max_iter(f"SOT({self.name}).setMaxIterations", n, now)
         self.control.setReady()
 
     @command

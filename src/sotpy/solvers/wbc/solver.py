@@ -21,13 +21,17 @@ a :class:`RegularisationTask` is the user-visible regularisation. Task levels ar
 ``"MultiLevelWeighted"`` (hybrid: strict levels, weights inside a level), through
 :class:`~sotpy.solvers.hierarchy.HierarchySolver`, whose contract is: level 0 first,
 each level's violation minimised without degrading the levels above, inequalities as
-rows ``lower <= A x <= upper`` of a level, and the minimum-norm point at the end. The
-stack passed is::
+rows ``lower <= A x <= upper`` of a level, and the minimum-norm point at the end, within
+its time and iteration budget (``Controller.setTimeBudget``). The torques are eliminated
+as in the weighted strategy (``tau = T y + t`` by the actuated rows of the dynamics; the
+levels are over ``y = (a, f)``: 50 variables instead of 82 on Talos). The stack passed
+is::
 
-    level 0 (hard):  A_dyn chi = c_dyn  and  lb <= C chi <= ub     (one level)
+    level 0 (hard):  the unactuated rows of A_dyn chi = c_dyn  and  lb <= C chi <= ub
+    (level 1:        the torque-rate rows of a transition, when they are on)
     level 1..L:      the tasks of level 0, 1, ... (user numbering), each task's rows
                      scaled by sqrt(diag W_k): the level's least squares is weighted
-    then:            min ||chi||  (the solver's final minimum-norm step)
+    then:            min ||(a, f)||  (the solver's final minimum-norm step)
 
 The hard level is "hard" because it comes first: if it can be met, every solution
 meets it exactly; if not (infeasible constraints), its least-violation point is found
@@ -81,12 +85,17 @@ from .constraints import (
     JointTorqueLimit,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
-from .qp import WeightedQP, packed_views
+from .qp import WeightedQP, _to_y, packed_views
 from .tasks import ContactWrenchCost, Task
 
 __all__ = ["RATE_TIME", "STRATEGIES", "Solution", "WholeBodyController"]
 
 STRATEGIES = ("OneLevelWeighted", "MultiLevelWeighted")
+#: the hierarchical strategy's default time budget per tick (s of CPU time): on Talos an
+#: iteration of its solver costs 0.1 to 0.4 ms and the dynamics and rows about 0.5 ms, so
+#: 1.5 ms keeps a tick within about 2.5 ms while a transition needs several iterations
+#: (the kinematic SOT's solver gets 0.5 ms: its iterations cost about 40 us)
+HIERARCHY_TIME_BUDGET = 1.5e-3
 
 #: The default torque rate bound of transitions: each joint's effort limit per
 #: ``RATE_TIME`` seconds (N m/s).
@@ -105,6 +114,9 @@ class Solution:
         reason: why not, when not found ("" otherwise).
         dynamics_residual: ``||A_dyn chi - c_dyn||_inf`` of the solution.
         rate_limited: whether the torque-rate rows of a transition were enforced.
+        budget_hit: the hierarchical strategy's solver stopped at its time or iteration
+            budget (its answer: the levels it proved kept, see
+            :attr:`WholeBodyController.last_hierarchy`).
     """
 
     chi: np.ndarray
@@ -115,6 +127,7 @@ class Solution:
     reason: str = ""
     dynamics_residual: float = 0.0
     rate_limited: bool = False
+    budget_hit: bool = False
 
 
 class WholeBodyController:
@@ -142,7 +155,9 @@ class WholeBodyController:
         self.contact_constraint = ContactConstraint("contacts")
         self.setStrategy(strategy)
         self.setRegularisation(regularisation)
-        self.hierarchy = HierarchySolver()
+        self.hierarchy = HierarchySolver(time_budget=HIERARCHY_TIME_BUDGET)
+        #: the hierarchical strategy's last HierarchyResult (None before its first tick)
+        self.last_hierarchy = None
         self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
         self.contact_cost = ContactWrenchCost()
         eff = np.asarray(self.robot.model.effortLimit, dtype=float)[self.robot.actuated]
@@ -492,6 +507,7 @@ class WholeBodyController:
         return sol
 
     def _solve(self, rate: bool) -> Solution:
+        self.last_hierarchy = None
         dyn, cons, tasks = self.problem(rate)
         limited = bool(self._rate_rows)
         self.last_dynamics, self.last_constraints = dyn, cons
@@ -513,6 +529,8 @@ class WholeBodyController:
             ok, reason = False, "non-finite solution"
         sol = self._split(chi, True, "", dyn, res) if ok else self._fallback(reason)
         sol.rate_limited = limited
+        if self.strategy != "OneLevelWeighted" and self.last_hierarchy is not None:
+            sol.budget_hit = self.last_hierarchy.budget_hit
         return sol
 
     def _split(self, chi: np.ndarray, found: bool, reason: str, dyn, res=None) -> Solution:
@@ -576,36 +594,58 @@ class WholeBodyController:
         return x, True, ""
 
     def _multilevel(self, dyn, cons, tasks) -> tuple[np.ndarray | None, bool, str]:
-        hard = (
-            np.vstack([dyn[0], cons[0]]),
-            np.concatenate([dyn[1], cons[1]]),
-            np.concatenate([dyn[1], cons[2]]),
-        )
-        if (
-            np.any(hard[1] > hard[2] + 1e-12)
-            or np.any(np.isnan(hard[1]))
-            or np.any(np.isnan(hard[2]))
-        ):
+        """The strict levels (see the module doc) over ``y = (a, f)``: the torques
+        eliminated through the actuated rows of the equations of motion, as the
+        weighted strategy does (``tau = T y + t``; on Talos 82 -> 50 variables and 38 ->
+        6 equality rows in the hard level), every constraint and task row mapped to
+        ``y`` (:func:`.qp._to_y`); the final minimum-norm criterion is then on the
+        accelerations and wrenches. ``chi`` is rebuilt from ``y``."""
+        A, c = dyn
+        C, lo, hi = cons
+        if np.any(lo > hi + 1e-12) or np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
             return None, False, "a constraint has lower > upper (infeasible bounds)"
-        levels: list[tuple] = [hard]
+        L = self.layout
+        nv, na = L.nv, L.na
+        r, u = self.robot.actuated, self._unactuated
+        ny = L.n - na
+        Tt = np.empty((na, ny))
+        Tt[:, :nv] = A[r, :nv]
+        Tt[:, nv:] = A[r, nv + na :]
+        tt = -c[r]
+        Au = np.empty((len(u), ny))
+        Au[:, :nv] = A[u, :nv]
+        Au[:, nv:] = A[u, nv + na :]
+        Cy, shift = _to_y(C, np.zeros(C.shape[0]), nv, na, Tt, tt)
+        lo_y, hi_y = lo + shift, hi + shift
         nr = self._rate_rows
+        m = C.shape[0] - nr
+        hard = (
+            np.vstack([Au, Cy[:m]]),
+            np.concatenate([c[u], lo_y[:m]]),
+            np.concatenate([c[u], hi_y[:m]]),
+        )
+        levels: list[tuple] = [hard]
         if nr:  # the torque-rate rows of a transition: a level of their own, after the hard
-            C, lo, hi = cons  # one (their least violation if they cannot be met)
-            m = hard[0].shape[0] - nr
-            levels = [
-                (hard[0][:m], hard[1][:m], hard[2][:m]),
-                (C[-nr:], lo[-nr:], hi[-nr:]),
-            ]
+            levels.append((Cy[m:], lo_y[m:], hi_y[m:]))  # one (their least violation)
         order = [*sorted({t[0] for t in tasks if t[0] >= 0}), -1]  # -1: the contact cost
         for lvl in order:
-            rows = [(E * np.sqrt(w)[:, None], f * np.sqrt(w)) for (k, E, f, w) in tasks if k == lvl]
+            rows = [(E, f, w) for (k, E, f, w) in tasks if k == lvl]
             if not rows:
                 continue
-            levels.append((np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
-        res = self.hierarchy.solve(levels)
+            E = np.vstack([q[0] for q in rows])
+            f = np.concatenate([q[1] for q in rows])
+            sw = np.sqrt(np.concatenate([q[2] for q in rows]))
+            Ey, fy = _to_y(E, f, nv, na, Tt, tt)
+            levels.append((Ey * sw[:, None], fy * sw))
+        res = self.last_hierarchy = self.hierarchy.solve(levels)
         if not res.feasible:
             return None, False, f"the constraints cannot be met (violation {res.residuals[0]:.3g})"
-        return np.asarray(res.x, dtype=float), True, ""
+        y = np.asarray(res.x, dtype=float)
+        chi = np.empty(L.n)
+        chi[:nv] = y[:nv]
+        chi[nv : nv + na] = Tt @ y + tt
+        chi[nv + na :] = y[nv:]
+        return chi, True, ""
 
 
 class _Assembly:

@@ -1,0 +1,248 @@
+"""The worst cases of the hierarchical solver: a 1 kHz controller is judged by its
+slowest tick.
+
+**Kinematic stacks** (:func:`adversarial_stack`, seeded): ``n`` from 8 to 40 variables,
+2 to 5 levels, often a box first; each level of rank-deficient rows (``U V^T``, rank below
+the row count) scaled by 1 to 100, its rows equalities, one-sided bounds (lower or upper)
+or two-sided; in most levels a pair of one-sided bounds that conflict along the same
+direction (``a x >= c`` and ``-s a x >= c'``). Two ways to meet them:
+
+* **cold**: each stack solved once by a new solver (no warm start), as a user's first
+  tick or a stack just edited;
+* **drifting**: each stack's data move a little at each of :data:`TICKS` ticks (matrix,
+  bounds) and one persistent solver follows, as a control loop does.
+
+**The SOT** (Talos, the tutorial's graph: feet and balance polygon in one
+``TaskInequality``, wrist, posture): 2,000 ticks, its velocity limits cut to 5 % at
+tick 500 (most joints reach them at once) and given back at tick 1,200.
+
+**The torque level**: ``sotpy demo talos-torque``'s motion on the floor with the
+hierarchical strategy (``MultiLevelWeighted``): the CoM shift in 1 s, the same in
+0.18 s (aggressive), the hand reach; joint position and torque limits and the friction
+pyramids in its hard level.
+
+Each solve runs with its default budget (0.5 ms of CPU time a call, 10 ms without a
+warm start); reported: median, p99 and worst wall time, the budget hits, the iterations,
+and for kinematic stacks the largest distance of a non-hit answer's level residuals to
+those of the same stack solved with no budget (0 when the budget is the only
+difference). Usage::
+
+    python benchmarks/bench_worst_case.py            # full run, prints Markdown
+    python benchmarks/bench_worst_case.py --quick    # fewer stacks and ticks
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from sotpy._bench import machine_line
+from sotpy.solvers import HierarchySolver
+
+#: ticks of a drifting stack
+TICKS = 40
+
+
+def adversarial_stack(rng: np.random.Generator, n: int | None = None, p: int | None = None):
+    """A random stack of the class above: a list of levels ``(A, lower, upper)``."""
+    n = n or int(rng.integers(8, 41))
+    p = p or int(rng.integers(2, 6))
+    levels = []
+    if rng.random() < 0.5:
+        levels.append((np.eye(n), -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)))
+    for _ in range(p):
+        m = int(rng.integers(2, max(3, n // 2)))
+        r = int(rng.integers(1, m + 1))
+        A = rng.standard_normal((m, r)) @ rng.standard_normal((r, n))
+        A *= 10.0 ** rng.uniform(0, 2, (m, 1))
+        c = A @ rng.standard_normal(n) * 0.5 + rng.standard_normal(m)
+        kind = rng.integers(0, 4, m)
+        lo = np.where(kind <= 1, c, -np.inf)
+        up = np.where((kind == 0) | (kind == 2), c, np.inf)
+        both = kind == 3
+        lo[both] = c[both] - rng.uniform(0, 1, both.sum())
+        up[both] = c[both] + rng.uniform(0, 1, both.sum())
+        if m >= 2 and rng.random() < 0.6:  # two one-sided bounds that conflict
+            A[1] = -A[0] * rng.uniform(0.5, 2.0)
+            lo[0], up[0] = 0.1 * np.linalg.norm(A[0]), np.inf
+            lo[1], up[1] = 0.1 * np.linalg.norm(A[1]), np.inf
+        levels.append((A, lo.astype(float), up.astype(float)))
+    return levels
+
+
+def drifted(levels, rng: np.random.Generator, t: int):
+    """``levels`` at tick ``t`` of a slow drift (each matrix and bound by a smooth
+    multiple of a fixed random direction)."""
+    out = []
+    for k, (A, lo, up) in enumerate(levels):
+        s = 0.02 * np.sin(0.2 * t + k)
+        dA = np.random.default_rng(1000 + k).standard_normal(A.shape)
+        db = np.random.default_rng(2000 + k).standard_normal(len(lo))
+        out.append((A + s * np.abs(A).max() * dA, lo + s * db, up + s * db))
+    return out
+
+
+def _summary(times_us, hits, its) -> dict[str, Any]:
+    t = np.asarray(times_us)
+    return {
+        "n": len(t),
+        "median": float(np.median(t)),
+        "p99": float(np.percentile(t, 99)),
+        "worst": float(t.max()),
+        "hits": int(sum(hits)),
+        "its": float(np.mean(its)),
+        "its_max": int(max(its)),
+    }
+
+
+def kinematic(n_stacks: int, ticks: int) -> dict[str, dict[str, Any]]:
+    """The cold and drifting runs over ``n_stacks`` seeded stacks."""
+    out = {}
+    for mode in ("cold", "drifting"):
+        times, hits, its, gaps = [], [], [], []
+        for seed in range(n_stacks):
+            rng = np.random.default_rng(seed)
+            base = adversarial_stack(rng)
+            solver = HierarchySolver()
+            steps = [base] if mode == "cold" else [drifted(base, rng, t) for t in range(ticks)]
+            for levels in steps:
+                if mode == "cold":
+                    solver = HierarchySolver()
+                t0 = time.perf_counter()
+                r = solver.solve(levels)
+                times.append((time.perf_counter() - t0) * 1e6)
+                hits.append(r.budget_hit)
+                its.append(r.iterations)
+                if not r.budget_hit and len(gaps) < 300:
+                    exact = HierarchySolver(time_budget=None, max_iter=10_000).solve(levels)
+                    if not exact.converged:
+                        raise RuntimeError(f"stack {seed}: no optimum without a budget either")
+                    scale = 1.0 + float(np.abs(exact.residuals).max())
+                    gaps.append(float(np.abs(r.residuals - exact.residuals).max()) / scale)
+        s = _summary(times, hits, its)
+        s["gap"] = max(gaps) if gaps else 0.0
+        out[mode] = s
+    return out
+
+
+def sot_limits(ticks: int) -> dict[str, Any]:
+    """The tutorial's Talos graph with its velocity limits cut and given back."""
+    import importlib.util
+    from pathlib import Path
+
+    from sotpy.graph import pool
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_sot", Path(__file__).with_name("bench_sot.py")
+    )
+    bench_sot = importlib.util.module_from_spec(spec)
+    import sys
+
+    sys.modules["bench_sot"] = bench_sot
+    spec.loader.exec_module(bench_sot)
+    pool.clear()
+    scene = bench_sot.reach_scene("talos")
+    c = bench_sot.build_sotpy_tutorial(scene)
+    solver = c.sot._solver
+    calls: list[float] = []
+    for name in ("solve", "solve_stacked"):
+        real = getattr(solver, name)
+
+        def timed(*a, real=real, **k):
+            t0 = time.perf_counter()
+            try:
+                return real(*a, **k)
+            finally:
+                calls.append((time.perf_counter() - t0) * 1e6)
+
+        setattr(solver, name, timed)
+    vmax = np.asarray(c.sot.upperVl.value).copy()
+    c.sot.upperVl.value = vmax
+    times, hits, its = [], [], []
+    for k in range(ticks):
+        if k == ticks // 4:
+            c.sot.upperVl.value = 0.05 * vmax
+        if k == (3 * ticks) // 5:
+            c.sot.upperVl.value = vmax
+        n = len(calls)
+        c.device.increment(bench_sot.DT)
+        times.append(sum(calls[n:]))
+        r = c.sot.lastResult
+        hits.append(r.budget_hit)
+        its.append(r.iterations)
+    pool.clear()
+    return _summary(times, hits, its)
+
+
+def torque(duration: float) -> dict[str, Any]:
+    """The Talos torque demo, hierarchical strategy, each hierarchy solve timed."""
+    from sotpy.demos.torque import run_talos_torque
+    from sotpy.graph import pool
+
+    times, hits, its = [], [], []
+    real = HierarchySolver.solve
+
+    def timed(self, levels, damping=None):
+        t0 = time.perf_counter()
+        r = real(self, levels, damping)
+        times.append((time.perf_counter() - t0) * 1e6)
+        hits.append(r.budget_hit)
+        its.append(r.iterations)
+        return r
+
+    HierarchySolver.solve = timed  # type: ignore[method-assign]
+    try:
+        pool.clear()
+        out = run_talos_torque(duration=duration, strategy="MultiLevelWeighted", prefix="wc")
+    finally:
+        HierarchySolver.solve = real  # type: ignore[method-assign]
+        pool.clear()
+    s = _summary(times, hits, its)
+    s["ok"] = bool(out.get("ok", out.get("passed", True)))
+    return s
+
+
+def table(rows: list[tuple[str, dict[str, Any]]]) -> str:
+    lines = [
+        "| case | solves | median us | p99 us | worst us | budget hits | iterations mean (max)"
+        " | notes |",
+        "|---|---:|---:|---:|---:|---:|---|---|",
+    ]
+    for name, s in rows:
+        note = ""
+        if "gap" in s:
+            note = f"non-hit answers vs no budget: {s['gap']:.1e}"
+        lines.append(
+            f"| {name} | {s['n']} | {s['median']:.0f} | {s['p99']:.0f} | {s['worst']:.0f}"
+            f" | {s['hits']} | {s['its']:.1f} ({s['its_max']}) | {note} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> list[tuple[str, dict[str, Any]]]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--quick", action="store_true", help="fewer stacks and ticks")
+    args = parser.parse_args(argv)
+    stacks, ticks, sot_ticks = (30, 10, 600) if args.quick else (300, TICKS, 2000)
+    print(machine_line())
+    print(f"load average at start: {os.getloadavg()[0]:.2f}")
+    print()
+    rows: list[tuple[str, dict[str, Any]]] = []
+    k = kinematic(stacks, ticks)
+    rows.append((f"kinematic, cold ({stacks} stacks, n 8-40)", k["cold"]))
+    rows.append((f"kinematic, drifting ({stacks} x {ticks} ticks)", k["drifting"]))
+    rows.append(
+        ("SOT Talos tutorial graph, velocity limits cut and restored", sot_limits(sot_ticks))
+    )
+    for d, name in ((1.0, "1 s"), (0.18, "0.18 s, aggressive")):
+        rows.append((f"torque Talos hierarchical, CoM shift {name}", torque(d)))
+    print(table(rows))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
