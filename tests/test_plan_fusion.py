@@ -621,6 +621,23 @@ def test_kernels_refusing_a_fortran_jacobian_fall_back_with_a_warning(bench_sot,
     assert entity(f"{ON}taskContactCom").task in on.device._controlPlan.steps
 
 
+@needs_kernels
+def test_read_only_inputs_stay_on_the_fused_path(bench_sot, scenes):
+    """A Dynamic's Jacobians are read-only arrays: the kernels take them (no warning,
+    no fallback) and give the control of the signals."""
+    on, off = build_pair(bench_sot, scenes("talos"))
+    tick_both(on, off, 3)
+    for p in (ON, OFF):
+        f = entity(f"feature{p}com")
+        f.jacobianIN.value.flags.writeable = False  # as a Dynamic's output is
+        assert not f.jacobianIN.value.flags.writeable
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SotpyWarning)
+        tick_both(on, off, 5)
+    assert on.sot.getTaskFusion() is True
+    assert entity(f"{ON}taskContactCom").task not in on.device._controlPlan.steps
+
+
 def test_set_task_fusion_needs_the_kernels(monkeypatch):
     monkeypatch.setattr(rk, "pose_rows", None)
     r = load_robot("nao", prefix="nokernels")

@@ -190,21 +190,31 @@ def warm_up() -> None:
     """Compile (or load from the cache) the kernels for the argument types a tick
     passes (Pinocchio's column-major rotations, C-order Jacobians, int64 rows), then
     forbid further compilation: an unforeseen type raises ``TypeError`` at the call
-    and the caller goes back to the feature signals, instead of compiling mid-loop."""
+    and the caller goes back to the feature signals, instead of compiling mid-loop.
+
+    The arrays a kernel only reads are given read-only here: numba then accepts both a
+    read-only and a writable array there (a signal's value may be either), without a
+    version compiled for each combination."""
     if pose_rows is None or _warm:
         return
     import pinocchio as pin
 
+    def ro(a: np.ndarray) -> np.ndarray:
+        v = a.view()
+        v.setflags(write=False)
+        return v
+
     M = pin.SE3.Identity()
     n = 2
     b = np.zeros(6)
-    Jq = np.zeros((6, n))
-    rows = np.arange(6, dtype=np.int64)
-    s, J = np.zeros(3), np.zeros((3, n))
+    Jq = ro(np.zeros((6, n)))
+    rows = ro(np.arange(6, dtype=np.int64))
+    s, J = ro(np.zeros(3)), ro(np.zeros((3, n)))
     # rows into a C-order buffer (the SOT's own) or into the m x n view of the solver's
     # stacked [A | -ref] (HierarchySolver.stacked)
     for A in (np.zeros((6, n)), np.zeros((6, n + 1))[:, :n]):
         for R, p in ((M.rotation, M.translation), (np.eye(3), np.zeros(3))):
+            R, p = ro(R), ro(p)
             pose_rows(R, p, R, p, Jq, rows, A, b, 0, 1.0)
         generic_rows(s, s, J, rows[:3], A, b, 0, 1.0)
         generic_rows(s, s[:0], J, rows[:3], A, b, 0, 1.0)

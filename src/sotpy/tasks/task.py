@@ -97,6 +97,12 @@ class TaskAbstract(Entity):
             J = J * controlSelec.mask(n)  # a copy, unselected columns zero
         return J
 
+    def _rowWriter(self) -> RowWriter | None:
+        """How an SOT writes this task's rows straight into its buffer (see
+        :mod:`sotpy.tasks.rows`); None here: a task class without a writer is read
+        through its ``jacobian`` and target signals."""
+        return None
+
     @Output(VECTOR, timeDependent=False)
     def errorTimeDerivative(self, *errordots: np.ndarray) -> np.ndarray:
         """The features' ``errordot`` (de/dt at a fixed configuration), stacked."""
