@@ -65,14 +65,26 @@ the one above stopped, with the previous call's active rows as its first guess; 
 of level ``j`` violated where the phase starts join its least squares (any point is a
 start for phase 0: level 0 has no level above to keep). Then it repeats:
 
-1. ``x^+`` = the eHQP point after ``own_j`` (``held_p`` for phase ``p``), ``d = x^+ - x``;
-   the step ``x + tau d`` stops at the first inactive row of the levels ``<= j`` (every
-   level in phase ``p``) that reaches a bound (``tau < 1``); the row becomes active: in
-   ``own_j`` if it is level ``j``'s, else held for ``j``. Rows of lower levels play no
-   part. The held rows of the phase that are not met at the new point (the previous
-   call's guesses, on their way to their bound) are released, so that the held rows are
-   always met constraints and a blocking row independent of them; held rows that depend
-   on the rows above them (the eHQP's rank says so) leave too.
+1. ``x^+`` = the phase's target, ``d = x^+ - x``. The target moves ``x`` only in the
+   directions of the phase's sub-levels (``Y_{2j}``, ``Y_{2j+1}``: ``held_j`` then
+   ``own_j``), to their least-squares values from ``x`` (damped: the damped least squares
+   of those coordinates, the others as ``x`` has them); the coordinates fixed above stay
+   as they are, those left below (``Z_{2j+2}``) are set to 0 when damped (the damping's
+   optimum is the recursion's point) and kept when not (the phase's optimal set is
+   flat there; a look-ahead through the sub-levels below picks the point to head
+   for). Phase ``p``'s target zeroes the coordinates left after ``held_p``. Taking the
+   recursion's whole point ``x_{2j+2}`` instead would also move the coordinates above
+   to their values *for the current active rows*, and a row that depends on the rows
+   above (met at ``x`` only because they are) could then block the step at ``tau = 0``
+   again and again: a cycle. With the coordinates above kept, such a row is met all
+   along the step and never blocks. The step ``x + tau d`` stops at the first inactive
+   row of the levels ``<= j`` (every level in phase ``p``) that reaches a bound (``tau <
+   1``); the row becomes active: in ``own_j`` if it is level ``j``'s, else held for
+   ``j``. Rows of lower levels play no part. The held rows of the phase that are not
+   met at the new point (the previous call's guesses, on their way to their bound) are
+   released, so that the held rows are always met constraints and a blocking row
+   independent of them; held rows that depend on the rows above them (the eHQP's rank
+   says so) leave too.
 2. At ``x^+``: ``own_j``'s rows strictly inside their interval are released (their
    residual has the wrong sign). Then the multipliers of objective ``j`` judge the rows
    that are met (own rows of the levels above, held rows) and not yet decided: a wrong
@@ -83,7 +95,10 @@ Phase ``j``'s steps change nothing in the sub-levels above ``held_j``: the level
 stay optimal and their decided rows keep their multipliers. Within a phase each step is a
 descent of the phase's convex objective (strictly convex when damped). A row released and
 blocked again at once (``tau = 0``: degenerate multipliers) is not released again until
-another row changes.
+another row changes. Nothing else limits the releases: a phase ends only when no
+significant multiplier has the wrong sign (a cap on how often a row may be released
+would end phases at a wrong row and call them optimal), and a cycle, should one occur,
+ends at the budget and is reported as a budget stop.
 
 The budget
 ----------
@@ -91,10 +106,11 @@ One iteration is one eHQP (the compiled twin restarts it at the first sub-level 
 rows changed). The call stops after ``max_iter`` eHQP solves, or when the thread's CPU
 time would exceed ``budget`` with one more iteration of the largest cost seen so far.
 Stopped in phase ``j``: levels ``< j`` are optimal; a last step (one eHQP with the
-current active rows of every level, taken from the current point up to the first
-inactive row of the levels ``<= j`` it would leave) adds the levels below, so level
-``j`` is no worse than when the phase began and no row of the levels ``<= j`` is left.
-``info[2]`` is ``j`` (``p + 1``: optimal).
+current active rows of every level; its target corrects the coordinates of the
+sub-levels from ``held_j`` down and keeps those above, and the step goes from the
+current point up to the first inactive row of the levels ``<= j`` it would leave) adds
+the levels below, so level ``j`` is no worse than when the phase began and no row of
+the levels ``<= j`` is left. ``info[2]`` is ``j`` (``p + 1``: optimal).
 
 Output: ``x``, ``res`` (``||v_k(x)||`` per level), ``ranks`` (the directions each level's
 rows fixed, its held rows included), ``fro`` (``||A_k||_F``), ``info = [iterations,
@@ -122,9 +138,6 @@ OPTIMAL, ITERATIONS, TIME = 0, 1, 2
 OK, NONFINITE_MATRIX, NAN_BOUND, CROSSED_BOUNDS, INFINITE_EQUALITY, NONFINITE_RESULT = range(6)
 #: row kinds
 EQ, INEQ, FREE = 0, 1, 2
-#: how often a row may be released in one call (a bound against cycles through several
-#: rows, where the multipliers of degenerate vertices disagree with the steps)
-MAX_RELEASES = 3
 #: a list to record the iteration's events in (tests and debugging), or None
 TRACE: list | None = None
 
@@ -183,21 +196,38 @@ def _ehqp(A, t, subrows, lams, phis, rank_tol, upto) -> _Ehqp:
     return out
 
 
-def _correct(A, t, e: _Ehqp, s: int, x: np.ndarray) -> np.ndarray:
-    """``x`` plus the least-squares step of (undamped) sub-level ``s`` taken from ``x``
-    in its directions ``Y_s``, with its own factorisation: the smallest correction of
-    ``x`` that gives the sub-level its optimal values."""
+def _correct(A, t, e: _Ehqp, s: int, x: np.ndarray, lam: float = 0.0) -> np.ndarray:
+    """``x`` moved in sub-level ``s``'s directions ``Y_s`` only (its coordinates in the
+    other directions kept) to the sub-level's optimum, with its own factorisation:
+    undamped, the smallest correction that gives the rows their least-squares values;
+    damped, the coordinates ``u`` that minimise ``||B_s^T u - P_s^T e||^2 + lam^2
+    ||u||^2`` (the recursion's damping, with the other coordinates as ``x`` has them)."""
     r = e.r[s]
     if r == 0:
         return x
     rows, piv, B = e.rows[s], e.piv[s], e.B[s]
-    c = e.c[s]
+    Ys = e.Y[:, e.c[s] : e.c[s] + r]
     rhs = (t[rows] - A[rows] @ x)[piv]
+    if lam:
+        ux = Ys.T @ x
+        S = np.vstack([B.T, lam * np.eye(r)])
+        u = np.linalg.lstsq(S, np.concatenate([rhs + B.T @ ux, np.zeros(r)]), rcond=None)[0]
+        return x + Ys @ (u - ux)
     if len(rows) == r:
         u, _ = lapack.dtrtrs(B[:, :r], rhs, lower=0, trans=1)
     else:
         u = np.linalg.lstsq(B.T, rhs, rcond=None)[0]
-    return x + e.Y[:, c : c + r] @ u
+    return x + Ys @ u
+
+
+def _toward(A, t, e: _Ehqp, s0: int, s1: int, x: np.ndarray, lam_sub) -> np.ndarray:
+    """``x`` corrected by sub-levels ``s0..s1-1`` in turn, then its coordinates in the
+    directions they leave (``Z_{s1}``) set to 0: the recursion's point, the coordinates
+    above ``s0`` as ``x`` has them (the recursion's own when ``x`` keeps their values)."""
+    for s in range(s0, s1):
+        x = _correct(A, t, e, s, x, lam_sub[s])
+    Z = e.Y[:, e.c[s1] :]
+    return x - Z @ (Z.T @ x)
 
 
 def _multipliers(A, g, below, e: _Ehqp, m: int) -> np.ndarray:
@@ -299,7 +329,6 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
 
     decided = np.zeros(m, dtype=bool)
     locked = np.zeros(m, dtype=bool)
-    releases = np.zeros(m, dtype=np.int64)
     longest = 0.0
     reason = OPTIMAL
     solved = p + 1
@@ -355,13 +384,10 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
             # and the step heads for the whole answer); the last phase: the minimum-norm
             # point
             if at_ehqp:
-                xj = e.xs[2 * j + 2] if j < p and lam_sub[2 * j + 1] else x
-                xp = x
+                xj = xp = x
             elif j < p:
-                if lam_sub[2 * j + 1]:
-                    # damped: the level's optimum is unique, the recursion's point (its
-                    # steps lie in the fixed directions, so it is the damping's optimum)
-                    xj = e.xs[2 * j + 2]
+                if lam_sub[2 * j + 1]:  # damped: the recursion's point (the damping's optimum)
+                    xj = _toward(A, t, e, 2 * j, 2 * j + 2, x, lam_sub)
                 else:
                     xj = _correct(A, t, e, 2 * j + 1, _correct(A, t, e, 2 * j, x))
                 xp = xj
@@ -369,7 +395,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                     for s2 in range(2 * j + 2, 2 * p + 1):
                         xp = _correct(A, t, e, s2, xp)
             else:
-                xj = xp = e.xs[upto]
+                xj = xp = _toward(A, t, e, 2 * p, 2 * p + 1, x, lam_sub)
             # the rows that may block: those of the levels <= j not active in the sub-levels
             # this phase sees (a row held for a phase below is free here)
             sub = 2 * attach[scope] + (attach[scope] == level_of[scope])
@@ -407,7 +433,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
             if blocked:
                 continue
             if j == p:
-                verdict = _verify(A, x, t, e, status, attach, decided, locked, releases, level_of,
+                verdict = _verify(A, x, t, e, status, attach, decided, locked, level_of,
                                   anorm, lam_sub, fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
                 if TRACE is not None:
                     TRACE.append(("verify", j, verdict))
@@ -439,7 +465,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                         TRACE.append(("inside", j, [int(i) for i in own[inside]]))
                     stale = True
                     continue
-            verdict = _verify(A, x, t, e, status, attach, decided, locked, releases, level_of,
+            verdict = _verify(A, x, t, e, status, attach, decided, locked, level_of,
                               anorm, lam_sub, fro, ineq, j, p, eps, dual_tol, xj)  # fmt: skip
             if TRACE is not None:
                 TRACE.append(("verify", j, verdict))
@@ -457,12 +483,13 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
         e = _ehqp(A, t, subrows, lam_sub, phis, rank_tol, 2 * p + 1)
         its += 1
         scope = ineq[(level_of[ineq] <= min(solved, p - 1)) & (status[ineq] == 0)]
-        tau, _, _ = _ratio(A, x, e.xs[2 * p + 1] - x, scope, lo, up, anorm, move_tol)
-        x = x + tau * (e.xs[2 * p + 1] - x)
+        d = _toward(A, t, e, 2 * solved, 2 * p + 1, x, lam_sub) - x
+        tau, _, _ = _ratio(A, x, d, scope, lo, up, anorm, move_tol)
+        x = x + tau * d
     _finish(A, lo, up, starts, x, e, status, ineq, its, reason, solved, x_out, res, ranks, info)
 
 
-def _verify(A, x, t, e, status, attach, decided, locked, releases, level_of, anorm, lam_sub,
+def _verify(A, x, t, e, status, attach, decided, locked, level_of, anorm, lam_sub,
             fro, ineq, j, p, eps, dual_tol, xj):  # fmt: skip
     """Phase ``j``'s multipliers judge the met active rows above ``own_j`` that no phase
     above decided: True when none is wrong (those with a significant multiplier are then
@@ -497,14 +524,13 @@ def _verify(A, x, t, e, status, attach, decided, locked, releases, level_of, ano
     mu = _multipliers(A, g, below, e, len(w))
     li = mu[cand] * anorm[cand] / gscale
     sig = np.abs(li) > dual_tol
-    wrong = cand[sig & (status[cand] * li < 0) & ~locked[cand] & (releases[cand] < MAX_RELEASES)]
+    wrong = cand[sig & (status[cand] * li < 0) & ~locked[cand]]
     if len(wrong) == 0:
         # the phase is done: the rows it kept are pinned for the phases below
         decided[cand[sig & (status[cand] * li > 0)]] = True
         return True
     i = int(wrong[np.argmax(np.abs(li[np.isin(cand, wrong)]))])
     status[i] = 0
-    releases[i] += 1
     return i
 
 

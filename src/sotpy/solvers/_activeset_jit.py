@@ -35,7 +35,6 @@ from ._activeset import (
     INEQ,
     INFINITE_EQUALITY,
     ITERATIONS,
-    MAX_RELEASES,
     NAN_BOUND,
     NONFINITE_MATRIX,
     NONFINITE_RESULT,
@@ -361,9 +360,11 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         pend[0] = -1
 
     @kernel(fast=True)
-    def _correct(A, t, act, lstart, s, x, ws, out, rhs):  # pragma: no cover - compiled
-        """``out`` = ``x`` plus the least-squares step of (undamped) sub-level ``s`` taken
-        from ``x``, with its factorisation from the last eHQP (see :mod:`._activeset`)."""
+    def _correct(A, t, act, lstart, s, lam, x, ws, out, rhs):  # pragma: no cover - compiled
+        """``out`` = ``x`` moved in sub-level ``s``'s directions only, to its optimum
+        (undamped: the least-squares correction; damped by ``lam``: the coordinates of
+        the recursion's damped least squares, the other coordinates as ``x`` has them),
+        with its factorisation from the last eHQP (see :mod:`._activeset`)."""
         Yt, _, _, cs, Mw, piv, _, ranks, _, _, u, Gs, gts, _, y, pend, _ = ws
         n = A.shape[1]
         if pend[0] == s:
@@ -376,17 +377,45 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         r0 = lstart[s]
         mk = lstart[s + 1] - r0
         c = cs[s]
+        M = Mw[r0 : r0 + mk]
         for j in range(mk):
             row = act[r0 + piv[r0 + j]]
             rhs[j] = t[row] - _dot(A[row], x, n)
-        if mk == r:
-            _forward(Mw[r0 : r0 + mk], r, rhs, u)
+        if lam != 0.0:  # the right-hand side of the coordinates: B^T (Y_s^T x) added
+            for i in range(r):
+                ux = _dot(Yt[c + i], x, n)
+                for j in range(i, mk):
+                    rhs[j] += M[j, i] * ux
+            _ls_apply(Gs[s], gts[s], mk, r, rhs, u, y)
+            for i in range(r):
+                u[i] -= _dot(Yt[c + i], x, n)
+        elif mk == r:
+            _forward(M, r, rhs, u)
         else:
             _ls_apply(Gs[s], gts[s], mk, r, rhs, u, y)
         for i in range(r):
             ui = u[i]
             for col in range(n):
                 out[col] += ui * Yt[c + i, col]
+
+    @kernel(fast=True)
+    def _toward(A, t, act, lstart, s0, s1, lam_sub, x, ws, out, rhs, tmp):  # pragma: no cover
+        """``out`` = ``x`` corrected by sub-levels ``s0..s1-1`` in turn, then its
+        coordinates in the directions they leave set to 0 (see :mod:`._activeset`)."""
+        Yt, _, _, cs, _, _, _, _, _, _, _, _, _, _, _, pend, _ = ws
+        n = A.shape[1]
+        for col in range(n):
+            out[col] = x[col]
+        for s in range(s0, s1):
+            _correct(A, t, act, lstart, s, lam_sub[s], out, ws, tmp, rhs)
+            for col in range(n):
+                out[col] = tmp[col]
+        if pend[0] >= 0:
+            _complete(ws, lstart, n)
+        for i in range(cs[s1], n):
+            v = _dot(Yt[i], out, n)
+            for col in range(n):
+                out[col] -= v * Yt[i, col]
 
     @kernel(fast=True)
     def _multipliers(A, act, lstart, below, g, ws, mu, h, rhs):  # pragma: no cover - compiled
@@ -493,7 +522,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         return tau, blk, side
 
     @kernel(fast=True)
-    def _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of, decided, locked, releases,
+    def _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of, decided, locked,
                 anorm, lam_sub, fro, j, p, eps, dual_tol, ws, mu, h, g, rhs, score,
                 cand):  # pragma: no cover - compiled  # fmt: skip
         """As ``_verify`` of :mod:`._activeset`: -1 when no judged row is wrong (the kept
@@ -556,13 +585,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             i = act[q]
             li = mu[q] * anorm[i] / gscale
             score[k] = li
-            free = not locked[i] and releases[i] < MAX_RELEASES
+            free = not locked[i]
             if abs(li) > dual_tol and status[i] * li < 0.0 and free and abs(li) > bs:
                 bs = abs(li)
                 best = i
         if best >= 0:
             status[best] = 0
-            releases[best] += 1
             return best
         for k in range(nc):
             i = act[cand[k]]
@@ -692,7 +720,6 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         cand = np.zeros(max(m, 1), dtype=np.int64)
         decided = np.zeros(max(m, 1), dtype=np.bool_)
         locked = np.zeros(max(m, 1), dtype=np.bool_)
-        releases = np.zeros(max(m, 1), dtype=np.int64)
         longest = 0.0
         reason = OPTIMAL
         solved = p + 1
@@ -754,29 +781,26 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 # the phase's target (see _activeset)
                 if at_ehqp:
                     for col in range(n):
-                        xj[col] = xs[2 * j + 2, col] if j < p else x[col]
+                        xj[col] = x[col]
                         xp[col] = x[col]
-                    if j < p and lam_sub[2 * j + 1] == 0.0:
-                        for col in range(n):
-                            xj[col] = x[col]
                 elif j < p and lam_sub[2 * j + 1] != 0.0:  # damped: the recursion's point
+                    _toward(A, t, act, lstart, 2 * j, 2 * j + 2, lam_sub, x, ws, xj, rhs, tmp)
                     for col in range(n):
-                        xj[col] = xs[2 * j + 2, col]
                         xp[col] = xj[col]
                 elif j < p:
-                    _correct(A, t, act, lstart, 2 * j, x, ws, tmp, rhs)
-                    _correct(A, t, act, lstart, 2 * j + 1, tmp, ws, xj, rhs)
+                    _correct(A, t, act, lstart, 2 * j, 0.0, x, ws, tmp, rhs)
+                    _correct(A, t, act, lstart, 2 * j + 1, 0.0, tmp, ws, xj, rhs)
                     for col in range(n):
                         xp[col] = xj[col]
                     if undamped:
                         for s2 in range(2 * j + 2, ns):
-                            _correct(A, t, act, lstart, s2, xp, ws, tmp, rhs)
+                            _correct(A, t, act, lstart, s2, 0.0, xp, ws, tmp, rhs)
                             for col in range(n):
                                 xp[col] = tmp[col]
                 else:
+                    _toward(A, t, act, lstart, ns - 1, ns, lam_sub, x, ws, xj, rhs, tmp)
                     for col in range(n):
-                        xj[col] = xs[ns, col]
-                        xp[col] = xs[ns, col]
+                        xp[col] = xj[col]
                 blocked = False
                 for part in range(0 if at_ehqp else 2):
                     hold = j + part
@@ -848,7 +872,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         stale = True
                         continue
                 verdict = _verify(A, x, xj, t, act, lstart, status, attach, kind, level_of,
-                                  decided, locked, releases, anorm, lam_sub, fro, j, p, eps,
+                                  decided, locked, anorm, lam_sub, fro, j, p, eps,
                                   dual_tol, ws, mu, h, g, rhs, score, cand)  # fmt: skip
                 if verdict < 0:
                     break
@@ -866,8 +890,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     t, phis)  # fmt: skip
             _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws, nzp, nzi)
             its += 1
+            _toward(A, t, act, lstart, 2 * solved, ns, lam_sub, x, ws, xj, rhs, tmp)
             for col in range(n):
-                d[col] = xs[ns, col] - x[col]
+                d[col] = xj[col] - x[col]
             tau, _i, _s = _ratio(A, x, d, kind, status, attach, level_of, lo, up, anorm,
                                  min(solved, p - 1), ns + 1, move_tol)  # fmt: skip
             for col in range(n):
