@@ -110,6 +110,9 @@ DEFAULT_INFLUENCE = 0.05
 #: Default damper gain xi (m/s): the largest approach speed, at d = d_i.
 DEFAULT_GAIN = 0.5
 
+#: coal's GJK and EPA tolerance (m) for the distance queries (its default is 1e-6).
+GJK_TOLERANCE = 1e-9
+
 _SHAPES = ("box", "sphere", "capsule")
 
 
@@ -353,7 +356,10 @@ class FeatureCollision(FeatureAbstract):
         gm.removeAllCollisionPairs()
         for i, j in self._pairs:
             gm.addCollisionPair(pin.CollisionPair(i, j))
-        self._gdata = pin.GeometryData(gm)
+        self._gdata = gd = pin.GeometryData(gm)
+        for req in gd.distanceRequests:  # witness points and normals to 1e-9 m
+            req.gjk_tolerance = GJK_TOLERANCE
+            req.epa_tolerance = GJK_TOLERANCE
         n = gm.ngeoms
         self._gjoint = np.array([g.parentJoint for g in gm.geometryObjects], dtype=int)
         centers = np.zeros((n, 3))
