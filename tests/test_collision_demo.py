@@ -14,8 +14,6 @@ from sotpy.demos.collision import BALL_OFFSET, BALL_RADIUS, DISTANCE_TOLERANCE, 
 from sotpy.dynamics import load_model
 from sotpy.tasks.collision import collisionPairs, convexGeometryModel
 
-TALOS_MODEL = {"source": "example-robot-data", "loader": "talos"}
-
 
 def _all_pairs(q, ball=None):
     """The smallest distance over the SRDF's pairs (and the ball's) at q, every pair
@@ -24,8 +22,7 @@ def _all_pairs(q, ball=None):
 
     model, _, collision = load_model("talos")
     gm = convexGeometryModel(collision)
-    described = type("R", (), {"description": {"model": TALOS_MODEL}})()
-    srdf = robotSrdf(described)
+    srdf = robotSrdf("talos")
     pairs = collisionPairs(model, gm, srdf)
     if ball is not None:
         import coal

@@ -118,9 +118,15 @@ _SHAPES = ("box", "sphere", "capsule")
 
 # -- the robot's geometry ---------------------------------------------------------------
 def robotSrdf(robot: Any) -> Path | None:
-    """The SRDF of a robot loaded with :func:`sotpy.dynamics.load_robot` from
-    example-robot-data (its ``<disable_collisions>`` pairs), or None when it has none."""
-    desc = getattr(robot, "description", {}) or {}
+    """The SRDF of a robot from example-robot-data (its ``<disable_collisions>``
+    pairs), or None when it has none; ``robot``: a :class:`~sotpy.dynamics.Robot` or a
+    robot description's name (``"talos"``)."""
+    if isinstance(robot, (str, Path)):
+        from ..dynamics import robot_info
+
+        desc = robot_info(robot)
+    else:
+        desc = getattr(robot, "description", {}) or {}
     m = desc.get("model", {})
     if m.get("source") != "example-robot-data":
         return None
@@ -394,7 +400,8 @@ class FeatureCollision(FeatureAbstract):
         R, o = H[:, :3, :3], H[:, :3, 3]
         gj = self._gjoint
         c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
-        bound = np.linalg.norm(c[self._pa] - c[self._pb], axis=1) - self._rsum
+        dc = c[self._pa] - c[self._pb]
+        bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
         near = np.flatnonzero(bound < di)
         far = bound[bound >= di]
         self._narrow = int(near.shape[0])
@@ -437,20 +444,16 @@ class FeatureCollision(FeatureAbstract):
         LWA = pin.LOCAL_WORLD_ALIGNED
         for j in used:
             Jall[j] = pin.getJointJacobian(model, data, int(j), LWA) if j else 0.0
-        J = np.zeros((m, model.nv))
-        for sign, jj, p in ((-1.0, jA, pA), (1.0, jB, pB)):
-            rr = p - o[jj]
-            rn = np.stack(
-                (
-                    rr[:, 1] * n[:, 2] - rr[:, 2] * n[:, 1],
-                    rr[:, 2] * n[:, 0] - rr[:, 0] * n[:, 2],
-                    rr[:, 0] * n[:, 1] - rr[:, 1] * n[:, 0],
-                ),
-                axis=1,
-            )
-            coef = np.concatenate((n, rn), axis=1) * sign
-            J += np.einsum("kc,kcv->kv", coef, Jall[jj])
-        self._rowJ = J
+        coef = np.empty((2, m, 6))
+        for side, (jj, p) in enumerate(((jA, pA), (jB, pB))):
+            coef[side, :, :3] = n
+            rr = p - o[jj]  # (p - o_j) x n, written out (np.cross costs more here)
+            coef[side, :, 3] = rr[:, 1] * n[:, 2] - rr[:, 2] * n[:, 1]
+            coef[side, :, 4] = rr[:, 2] * n[:, 0] - rr[:, 0] * n[:, 2]
+            coef[side, :, 5] = rr[:, 0] * n[:, 1] - rr[:, 1] * n[:, 0]
+        coef[0] *= -1.0
+        Js = Jall[np.concatenate((jA, jB))].reshape(2, m, 6, model.nv)
+        self._rowJ = np.einsum("skc,skcv->kv", coef, Js)
 
     # -- queries ------------------------------------------------------------------------
     def distances(self, full: bool = False) -> np.ndarray:
