@@ -232,6 +232,295 @@ def _shape(where: str, shape: str, size: Sequence[float]) -> coal.ShapeBase:
     raise CommandError(f"{where}: a {shape} takes {expected[shape]}, got {size!r}")
 
 
+# -- the pairs --------------------------------------------------------------------------
+class CollisionPairs:
+    """The geometry, the pairs and the per-tick computation of a collision model, with
+    no graph (see the module doc): what :class:`FeatureCollision` and the torque-level
+    :class:`~sotpy.solvers.wbc.collision.CollisionConstraint` share.
+
+    ``CollisionPairs(model, geometry, srdf=None, who="CollisionPairs")``: the
+    ``pinocchio.Model``, its collision ``GeometryModel`` (copied, meshes replaced by
+    their hulls), the SRDF whose disabled pairs are removed; ``who`` starts the messages
+    of the errors. After :meth:`compute`, ``rowPairs`` (the rows' pair indices),
+    ``rowD`` (their distances, m), ``rowJ`` (their ``J_d``, rows x nv), ``rowNormal``,
+    ``rowPointA``, ``rowPointB`` (world), ``rowJointA``, ``rowJointB``, ``minDistance``
+    (m) and ``narrow`` (pairs that reached coal).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        geometry: pin.GeometryModel,
+        srdf: str | Path | None = None,
+        who: str = "CollisionPairs",
+    ) -> None:
+        self.who = who
+        self._model = model
+        self._geom = convexGeometryModel(geometry)
+        self._robotGeoms = self._geom.ngeoms
+        self._obstacles: dict[str, int] = {}
+        self._pairs = collisionPairs(model, self._geom, srdf)
+        self._empty()
+        self._rebuild()
+
+    def _empty(self, lowest: float = math.inf) -> None:
+        model = self._model
+        self.rowPairs, self.rowD = np.zeros(0, dtype=int), np.zeros(0)
+        self.rowJ = np.zeros((0, model.nv))
+        self.rowNormal = self.rowPointA = self.rowPointB = np.zeros((0, 3))
+        self.rowJointA = self.rowJointB = np.zeros(0, dtype=int)
+        self.minDistance, self.narrow = lowest, 0
+
+    def _rebuild(self) -> None:
+        """The geometry data, the pair arrays and the bounding spheres, after an edit."""
+        gm = self._geom
+        gm.removeAllCollisionPairs()
+        for i, j in self._pairs:
+            gm.addCollisionPair(pin.CollisionPair(i, j))
+        self._gdata = gd = pin.GeometryData(gm)
+        for req in gd.distanceRequests:  # witness points and normals to 1e-9 m
+            req.gjk_tolerance = GJK_TOLERANCE
+            req.epa_tolerance = GJK_TOLERANCE
+        n = gm.ngeoms
+        self._gjoint = np.array([g.parentJoint for g in gm.geometryObjects], dtype=int)
+        centers = np.zeros((n, 3))
+        radii = np.zeros(n)
+        for k, g in enumerate(gm.geometryObjects):
+            shape = g.geometry
+            shape.computeLocalAABB()
+            centers[k] = g.placement.act(np.asarray(shape.aabb_center, dtype=float))
+            radii[k] = shape.aabb_radius
+        self._gcenter, self._gradius = centers, radii
+        self._pa = np.array([p[0] for p in self._pairs], dtype=int)
+        self._pb = np.array([p[1] for p in self._pairs], dtype=int)
+        self._rsum = radii[self._pa] + radii[self._pb] if self._pairs else np.zeros(0)
+        self._joints = np.unique(self._gjoint)
+        self._cmap = np.zeros((n, n), dtype=bool)
+        self._jac = np.zeros((self._model.njoints, 6, self._model.nv))
+
+    # -- the tick -----------------------------------------------------------------------
+    def compute(self, data: pin.Data, di: float) -> None:
+        """The tick: broad phase, narrow phase and rows at ``data``'s kinematics (joint
+        placements and Jacobians computed), for the influence distance ``di`` (m)."""
+        model, gm, gd = self._model, self._geom, self._gdata
+        if not self._pairs:
+            self._empty()
+            return
+        # broad phase: sphere centres in the world, one pass over the pairs
+        H = np.array([M.homogeneous for M in data.oMi])  # joint placements, world
+        R, o = H[:, :3, :3], H[:, :3, 3]
+        gj = self._gjoint
+        c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
+        dc = c[self._pa] - c[self._pb]
+        bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
+        near = np.flatnonzero(bound < di)
+        far = bound[bound >= di]
+        lowest = float(far.min()) if far.shape[0] else math.inf
+        if not near.shape[0]:
+            self._empty(lowest)
+            return
+        # narrow phase on the near pairs only: one call, the others deactivated
+        pin.updateGeometryPlacements(model, data, gm, gd)
+        cmap = self._cmap
+        cmap[:] = False
+        cmap[self._pa[near], self._pb[near]] = True
+        gd.setActiveCollisionPairs(gm, cmap, True)
+        pin.computeDistances(gm, gd)
+        results = gd.distanceResults
+        dist = np.array([results[int(k)].min_distance for k in near])
+        lowest = min(lowest, float(dist.min()))
+        inside = dist < di
+        rows = near[inside]
+        m = rows.shape[0]
+        if not m:
+            self._empty(lowest)
+            self.narrow = int(near.shape[0])
+            return
+        self.minDistance, self.narrow = lowest, int(near.shape[0])
+        self.rowPairs, self.rowD = rows, dist[inside]
+        # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + ((p - o_j) x n)^T J_ang
+        n = np.empty((m, 3))
+        pA = np.empty((m, 3))
+        pB = np.empty((m, 3))
+        for r, k in enumerate(rows):
+            res = results[int(k)]
+            n[r] = res.normal
+            pA[r] = res.getNearestPoint1()
+            pB[r] = res.getNearestPoint2()
+        jA, jB = self._gjoint[self._pa[rows]], self._gjoint[self._pb[rows]]
+        used = np.unique(np.concatenate((jA, jB)))
+        Jall = self._jac
+        LWA = pin.LOCAL_WORLD_ALIGNED
+        for j in used:
+            Jall[j] = pin.getJointJacobian(model, data, int(j), LWA) if j else 0.0
+        coef = np.empty((2, m, 6))
+        for side, (jj, p) in enumerate(((jA, pA), (jB, pB))):
+            coef[side, :, :3] = n
+            rr = p - o[jj]  # (p - o_j) x n, written out (np.cross costs more here)
+            coef[side, :, 3] = rr[:, 1] * n[:, 2] - rr[:, 2] * n[:, 1]
+            coef[side, :, 4] = rr[:, 2] * n[:, 0] - rr[:, 0] * n[:, 2]
+            coef[side, :, 5] = rr[:, 0] * n[:, 1] - rr[:, 1] * n[:, 0]
+        coef[0] *= -1.0
+        Js = Jall[np.concatenate((jA, jB))].reshape(2, m, 6, model.nv)
+        self.rowJ = np.einsum("skc,skcv->kv", coef, Js)
+        self.rowNormal, self.rowPointA, self.rowPointB = n, pA, pB
+        self.rowJointA, self.rowJointB = jA, jB
+        self._origins = o
+
+    # -- queries ------------------------------------------------------------------------
+    def distances(self, data: pin.Data) -> np.ndarray:
+        """The distance of every pair (m), in the order of :meth:`listPairs`, computed by
+        coal at ``data``'s joint placements (for checks and tests; not the tick's path,
+        which skips far pairs)."""
+        model, gm, gd = self._model, self._geom, self._gdata
+        pin.updateGeometryPlacements(model, data, gm, gd)
+        out = np.empty(len(self._pairs))
+        for k in range(len(self._pairs)):
+            pin.computeDistance(gm, gd, k)
+            out[k] = gd.distanceResults[k].min_distance
+        return out
+
+    def _geometryIndex(self, cmd: str, name: str) -> int:
+        gm = self._geom
+        if not isinstance(name, str) or not gm.existGeometryName(name):
+            raise CommandError(
+                f"{self.who}.{cmd}: no geometry named {name!r} (see listGeometries())"
+            )
+        return int(gm.getGeometryId(name))
+
+    def listGeometries(self) -> list[str]:
+        """The geometries' names: the robot's, then the obstacles'."""
+        return [g.name for g in self._geom.geometryObjects]
+
+    def listPairs(self) -> list[str]:
+        """The pairs, ``"a : b"`` by geometry name; a row's index in ``activePairs`` is
+        its index here."""
+        return [self.pairName(k) for k in range(len(self._pairs))]
+
+    def getPairCount(self) -> int:
+        """The number of pairs."""
+        return len(self._pairs)
+
+    def pairName(self, k: int) -> str:
+        """The pair of index ``k``, ``"a : b"``."""
+        objs = self._geom.geometryObjects
+        i, j = self._pairs[int(k)]
+        return f"{objs[i].name} : {objs[j].name}"
+
+    def addPair(self, a: str, b: str) -> None:
+        """Check the pair of geometries ``a`` and ``b`` (names) too."""
+        i, j = sorted((self._geometryIndex("addPair", a), self._geometryIndex("addPair", b)))
+        if i == j:
+            raise CommandError(f"{self.who}.addPair: a geometry cannot collide with itself ({a!r})")
+        if (i, j) in self._pairs:
+            raise CommandError(f"{self.who}.addPair: the pair {a!r}, {b!r} is already checked")
+        self._pairs = sorted([*self._pairs, (i, j)])
+        self._rebuild()
+
+    def removePair(self, a: str, b: str) -> None:
+        """Stop checking the pair of geometries ``a`` and ``b`` (names)."""
+        ij = tuple(
+            sorted((self._geometryIndex("removePair", a), self._geometryIndex("removePair", b)))
+        )
+        if ij not in self._pairs:
+            raise CommandError(
+                f"{self.who}.removePair: the pair {a!r}, {b!r} is not "
+                f"checked (see listPairs(); {len(self._pairs)} pairs)"
+            )
+        self._pairs = [p for p in self._pairs if p != ij]
+        self._rebuild()
+
+    def addObstacle(
+        self,
+        name: str,
+        shape: str,
+        size: Sequence[float] | float,
+        placement: Any,
+        frame: str | None = None,
+    ) -> None:
+        """Add an obstacle and its pairs with every robot geometry (except those of the
+        joint it is attached to).
+
+        Args:
+            name: a new geometry name.
+            shape: ``"box"`` (size: side lengths x y z), ``"sphere"`` (radius) or
+                ``"capsule"`` (radius, length along the placement's z); m.
+            placement: its placement in the world, or in ``frame`` when given: a
+                ``pinocchio.SE3``, a 4x4 matrix or a position (m).
+            frame: a frame of the robot's model it moves with (None: the world).
+        """
+        where = f"{self.who}.addObstacle"
+        if not isinstance(name, str) or not name:
+            raise CommandError(f"{where}: expected a name (a non-empty string), got {name!r}")
+        if self._geom.existGeometryName(name):
+            raise CommandError(f"{where}: a geometry named {name!r} already exists")
+        geometry = _shape(where, shape, size)
+        M = _placement(where, placement)
+        joint, fid = 0, 0
+        if frame is not None:
+            model = self._model
+            if not isinstance(frame, str) or not model.existFrame(frame):
+                raise CommandError(
+                    f"{where}: the model {model.name!r} has no frame named {frame!r}"
+                )
+            fid = int(model.getFrameId(frame))
+            f = model.frames[fid]
+            joint = int(f.parentJoint)
+            M = f.placement * M
+        obj = pin.GeometryObject(name, joint, fid, M, geometry)
+        gid = int(self._geom.addGeometryObject(obj))
+        robot = range(self._robotGeoms)
+        objs = self._geom.geometryObjects
+        new = [(g, gid) for g in robot if objs[g].parentJoint != joint or joint == 0]
+        self._obstacles[name] = gid
+        self._pairs = sorted([*self._pairs, *new])
+        self._rebuild()
+
+    def removeObstacle(self, name: str) -> None:
+        """Remove the obstacle ``name`` and its pairs."""
+        if name not in self._obstacles:
+            raise CommandError(
+                f"{self.who}.removeObstacle: no obstacle named {name!r} "
+                f"(obstacles: {', '.join(self._obstacles) or 'none'})"
+            )
+        gid = self._obstacles.pop(name)
+        old = self._geom
+        gm = pin.GeometryModel()
+        for k, g in enumerate(old.geometryObjects):
+            if k != gid:
+                gm.addGeometryObject(g)
+        shift = {k: k - (k > gid) for k in range(old.ngeoms) if k != gid}
+        self._pairs = sorted((shift[i], shift[j]) for i, j in self._pairs if gid not in (i, j))
+        self._obstacles = {n: shift[g] for n, g in self._obstacles.items()}
+        self._geom = gm
+        self._rebuild()
+
+    def setObstaclePlacement(self, name: str, placement: Any) -> None:
+        """Move the obstacle ``name``: its new placement in the world, or in the frame it
+        is attached to (a ``pinocchio.SE3``, a 4x4 matrix or a position, m)."""
+        where = f"{self.who}.setObstaclePlacement"
+        if name not in self._obstacles:
+            raise CommandError(
+                f"{where}: no obstacle named {name!r} (obstacles: "
+                f"{', '.join(self._obstacles) or 'none'})"
+            )
+        M = _placement(where, placement)
+        obj = self._geom.geometryObjects[self._obstacles[name]]
+        if obj.parentFrame:
+            M = self._model.frames[obj.parentFrame].placement * M
+        obj.placement = M
+        self._rebuild()
+
+    def clearPairs(self) -> None:
+        """Check no pair (``addPair`` or ``addObstacle`` add some back)."""
+        self._pairs = []
+        self._rebuild()
+
+    def listObstacles(self) -> list[str]:
+        """The obstacles' names."""
+        return list(self._obstacles)
+
+
 # -- the feature ------------------------------------------------------------------------
 class FeatureCollision(FeatureAbstract):
     """The distances of the collision pairs under the influence distance, and their
@@ -283,24 +572,24 @@ class FeatureCollision(FeatureAbstract):
             di,
             None,
         )
-        self._compute(di)
+        self.core.compute(self._data, di)
         return t
 
     @Output(VECTOR, deps=("collisions",))
     def activePairs(self, _pass: int) -> np.ndarray:
         """Indices (in :meth:`listPairs`) of the pairs that are rows this tick."""
-        return self._rowPairs.astype(float)
+        return self.core.rowPairs.astype(float)
 
     @Output(DOUBLE, deps=("collisions",))
     def minDistance(self, _pass: int) -> float:
         """The smallest distance over every pair (m): exact when under d_i, otherwise a
         lower bound (the broad phase's)."""
-        return self._min
+        return self.core.minDistance
 
     @Output(INT, deps=("collisions",))
     def narrowPhaseCount(self, _pass: int) -> int:
         """How many pairs passed the broad phase and were computed by coal this tick."""
-        return self._narrow
+        return self.core.narrow
 
     def __init__(
         self,
@@ -327,19 +616,8 @@ class FeatureCollision(FeatureAbstract):
         if srdf is not None and not Path(srdf).is_file():
             raise EntityError(f"FeatureCollision({name}): no SRDF file {str(srdf)!r}")
         self._dynamic = dynamic
-        self._model: pin.Model = model
         self._data: pin.Data = dynamic.data
-        self._geom = convexGeometryModel(geometry)
-        self._robotGeoms = self._geom.ngeoms
-        self._obstacles: dict[str, int] = {}
-        self._srdf = srdf
-        self._pairs = collisionPairs(model, self._geom, srdf)
-        self._rowPairs = np.zeros(0, dtype=int)
-        self._rowD = np.zeros(0)
-        self._rowJ = np.zeros((0, model.nv))
-        self._min = math.inf
-        self._narrow = 0
-        self._rebuild()
+        self.core = CollisionPairs(model, geometry, srdf, who=f"FeatureCollision({name})")
         super().__init__(name)
         plug(dynamic.kinematics, self.kinematics)
 
@@ -351,184 +629,58 @@ class FeatureCollision(FeatureAbstract):
         return [self.collisions]
 
     def _error(self, _pass: int) -> np.ndarray:
-        return self._rowD.copy()
+        return self.core.rowD.copy()
 
     def _jacobian(self, _pass: int) -> np.ndarray:
-        return self._rowJ.copy()
-
-    def _rebuild(self) -> None:
-        """The geometry data, the pair arrays and the bounding spheres, after an edit."""
-        gm = self._geom
-        gm.removeAllCollisionPairs()
-        for i, j in self._pairs:
-            gm.addCollisionPair(pin.CollisionPair(i, j))
-        self._gdata = gd = pin.GeometryData(gm)
-        for req in gd.distanceRequests:  # witness points and normals to 1e-9 m
-            req.gjk_tolerance = GJK_TOLERANCE
-            req.epa_tolerance = GJK_TOLERANCE
-        n = gm.ngeoms
-        self._gjoint = np.array([g.parentJoint for g in gm.geometryObjects], dtype=int)
-        centers = np.zeros((n, 3))
-        radii = np.zeros(n)
-        for k, g in enumerate(gm.geometryObjects):
-            shape = g.geometry
-            shape.computeLocalAABB()
-            centers[k] = g.placement.act(np.asarray(shape.aabb_center, dtype=float))
-            radii[k] = shape.aabb_radius
-        self._gcenter, self._gradius = centers, radii
-        self._pa = np.array([p[0] for p in self._pairs], dtype=int)
-        self._pb = np.array([p[1] for p in self._pairs], dtype=int)
-        self._rsum = radii[self._pa] + radii[self._pb] if self._pairs else np.zeros(0)
-        self._joints = np.unique(self._gjoint)
-        self._cmap = np.zeros((n, n), dtype=bool)
-        self._jac = np.zeros((self._model.njoints, 6, self._model.nv))
+        return self.core.rowJ.copy()
 
     def _changed(self) -> None:
-        self._rebuild()
         self.collisions.setReady()
 
-    # -- the tick -----------------------------------------------------------------------
-    def _compute(self, di: float) -> None:
-        model, data, gm, gd = self._model, self._data, self._geom, self._gdata
-        if not self._pairs:
-            self._rowPairs, self._rowD = np.zeros(0, dtype=int), np.zeros(0)
-            self._rowJ = np.zeros((0, model.nv))
-            self._min, self._narrow = math.inf, 0
-            return
-        # broad phase: sphere centres in the world, one pass over the pairs
-        H = np.array([M.homogeneous for M in data.oMi])  # joint placements, world
-        R, o = H[:, :3, :3], H[:, :3, 3]
-        gj = self._gjoint
-        c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
-        dc = c[self._pa] - c[self._pb]
-        bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
-        near = np.flatnonzero(bound < di)
-        far = bound[bound >= di]
-        self._narrow = int(near.shape[0])
-        lowest = float(far.min()) if far.shape[0] else math.inf
-        if not near.shape[0]:
-            self._rowPairs, self._rowD = np.zeros(0, dtype=int), np.zeros(0)
-            self._rowJ = np.zeros((0, model.nv))
-            self._min = lowest
-            return
-        # narrow phase on the near pairs only: one call, the others deactivated
-        pin.updateGeometryPlacements(model, data, gm, gd)
-        cmap = self._cmap
-        cmap[:] = False
-        cmap[self._pa[near], self._pb[near]] = True
-        gd.setActiveCollisionPairs(gm, cmap, True)
-        pin.computeDistances(gm, gd)
-        results = gd.distanceResults
-        dist = np.array([results[int(k)].min_distance for k in near])
-        lowest = min(lowest, float(dist.min()))
-        inside = dist < di
-        rows = near[inside]
-        m = rows.shape[0]
-        self._min = lowest
-        self._rowPairs, self._rowD = rows, dist[inside]
-        if not m:
-            self._rowJ = np.zeros((0, model.nv))
-            return
-        # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + ((p - o_j) x n)^T J_ang
-        n = np.empty((m, 3))
-        pA = np.empty((m, 3))
-        pB = np.empty((m, 3))
-        for r, k in enumerate(rows):
-            res = results[int(k)]
-            n[r] = res.normal
-            pA[r] = res.getNearestPoint1()
-            pB[r] = res.getNearestPoint2()
-        jA, jB = self._gjoint[self._pa[rows]], self._gjoint[self._pb[rows]]
-        used = np.unique(np.concatenate((jA, jB)))
-        Jall = self._jac
-        LWA = pin.LOCAL_WORLD_ALIGNED
-        for j in used:
-            Jall[j] = pin.getJointJacobian(model, data, int(j), LWA) if j else 0.0
-        coef = np.empty((2, m, 6))
-        for side, (jj, p) in enumerate(((jA, pA), (jB, pB))):
-            coef[side, :, :3] = n
-            rr = p - o[jj]  # (p - o_j) x n, written out (np.cross costs more here)
-            coef[side, :, 3] = rr[:, 1] * n[:, 2] - rr[:, 2] * n[:, 1]
-            coef[side, :, 4] = rr[:, 2] * n[:, 0] - rr[:, 0] * n[:, 2]
-            coef[side, :, 5] = rr[:, 0] * n[:, 1] - rr[:, 1] * n[:, 0]
-        coef[0] *= -1.0
-        Js = Jall[np.concatenate((jA, jB))].reshape(2, m, 6, model.nv)
-        self._rowJ = np.einsum("skc,skcv->kv", coef, Js)
-
-    # -- queries ------------------------------------------------------------------------
-    def distances(self, full: bool = False) -> np.ndarray:
+    def distances(self) -> np.ndarray:
         """The distance of every pair (m), in the order of :meth:`listPairs`, computed by
         coal now at the Dynamic's current configuration (for checks and tests; not the
         tick's path, which skips far pairs)."""
         self._dynamic.kinematics.value  # noqa: B018 - run the kinematics pass
-        model, data, gm, gd = self._model, self._data, self._geom, self._gdata
-        pin.updateGeometryPlacements(model, data, gm, gd)
-        out = np.empty(len(self._pairs))
-        for k in range(len(self._pairs)):
-            pin.computeDistance(gm, gd, k)
-            out[k] = gd.distanceResults[k].min_distance
-        return out
-
-    def _geometryIndex(self, cmd: str, name: str) -> int:
-        gm = self._geom
-        if not isinstance(name, str) or not gm.existGeometryName(name):
-            raise CommandError(
-                f"{self.className}({self.name}).{cmd}: no geometry named {name!r} (see "
-                "listGeometries())"
-            )
-        return int(gm.getGeometryId(name))
+        return self.core.distances(self._data)
 
     @command
     def listGeometries(self) -> list[str]:
         """The geometries' names: the robot's, then the obstacles'."""
-        return [g.name for g in self._geom.geometryObjects]
+        return self.core.listGeometries()
 
     @command
     def listPairs(self) -> list[str]:
         """The pairs, ``"a : b"`` by geometry name; a row's index in ``activePairs`` is
         its index here."""
-        return [self.pairName(k) for k in range(len(self._pairs))]
+        return self.core.listPairs()
 
     @command
     def getPairCount(self) -> int:
         """The number of pairs."""
-        return len(self._pairs)
+        return self.core.getPairCount()
 
     @command
     def pairName(self, k: int) -> str:
         """The pair of index ``k``, ``"a : b"``."""
-        objs = self._geom.geometryObjects
-        i, j = self._pairs[int(k)]
-        return f"{objs[i].name} : {objs[j].name}"
+        return self.core.pairName(k)
 
     @command
     def addPair(self, a: str, b: str) -> None:
         """Check the pair of geometries ``a`` and ``b`` (names) too."""
-        i, j = sorted((self._geometryIndex("addPair", a), self._geometryIndex("addPair", b)))
-        if i == j:
-            raise CommandError(
-                f"{self.className}({self.name}).addPair: a geometry cannot collide with "
-                f"itself ({a!r})"
-            )
-        if (i, j) in self._pairs:
-            raise CommandError(
-                f"{self.className}({self.name}).addPair: the pair {a!r}, {b!r} is already checked"
-            )
-        self._pairs = sorted([*self._pairs, (i, j)])
+        self.core.addPair(a, b)
         self._changed()
 
     @command
     def removePair(self, a: str, b: str) -> None:
         """Stop checking the pair of geometries ``a`` and ``b`` (names)."""
-        ij = tuple(
-            sorted((self._geometryIndex("removePair", a), self._geometryIndex("removePair", b)))
-        )
-        if ij not in self._pairs:
-            raise CommandError(
-                f"{self.className}({self.name}).removePair: the pair {a!r}, {b!r} is not "
-                f"checked (see listPairs(); {len(self._pairs)} pairs)"
-            )
-        self._pairs = [p for p in self._pairs if p != ij]
+        self.core.removePair(a, b)
+        self._changed()
+
+    @command
+    def clearPairs(self) -> None:
+        """Check no pair (``addPair`` or ``addObstacle`` add some back)."""
+        self.core.clearPairs()
         self._changed()
 
     @command
@@ -540,91 +692,28 @@ class FeatureCollision(FeatureAbstract):
         placement: Any,
         frame: str | None = None,
     ) -> None:
-        """Add an obstacle and its pairs with every robot geometry (except those of the
-        joint it is attached to).
-
-        Args:
-            name: a new geometry name.
-            shape: ``"box"`` (size: side lengths x y z), ``"sphere"`` (radius) or
-                ``"capsule"`` (radius, length along the placement's z); m.
-            placement: its placement in the world, or in ``frame`` when given: a
-                ``pinocchio.SE3``, a 4x4 matrix or a position (m).
-            frame: a frame of the robot's model it moves with (None: the world).
-        """
-        where = f"{self.className}({self.name}).addObstacle"
-        if not isinstance(name, str) or not name:
-            raise CommandError(f"{where}: expected a name (a non-empty string), got {name!r}")
-        if self._geom.existGeometryName(name):
-            raise CommandError(f"{where}: a geometry named {name!r} already exists")
-        geometry = _shape(where, shape, size)
-        M = _placement(where, placement)
-        joint, fid = 0, 0
-        if frame is not None:
-            model = self._model
-            if not isinstance(frame, str) or not model.existFrame(frame):
-                raise CommandError(
-                    f"{where}: the model {model.name!r} has no frame named {frame!r}"
-                )
-            fid = int(model.getFrameId(frame))
-            f = model.frames[fid]
-            joint = int(f.parentJoint)
-            M = f.placement * M
-        obj = pin.GeometryObject(name, joint, fid, M, geometry)
-        gid = int(self._geom.addGeometryObject(obj))
-        robot = range(self._robotGeoms)
-        objs = self._geom.geometryObjects
-        new = [(g, gid) for g in robot if objs[g].parentJoint != joint or joint == 0]
-        self._obstacles[name] = gid
-        self._pairs = sorted([*self._pairs, *new])
+        """Add an obstacle (see :meth:`CollisionPairs.addObstacle`): ``shape`` ``"box"``
+        (side lengths), ``"sphere"`` (radius) or ``"capsule"`` (radius, length), m;
+        ``placement`` in the world, or in ``frame`` (a frame of the model)."""
+        self.core.addObstacle(name, shape, size, placement, frame)
         self._changed()
 
     @command
     def removeObstacle(self, name: str) -> None:
         """Remove the obstacle ``name`` and its pairs."""
-        if name not in self._obstacles:
-            raise CommandError(
-                f"{self.className}({self.name}).removeObstacle: no obstacle named {name!r} "
-                f"(obstacles: {', '.join(self._obstacles) or 'none'})"
-            )
-        gid = self._obstacles.pop(name)
-        old = self._geom
-        gm = pin.GeometryModel()
-        for k, g in enumerate(old.geometryObjects):
-            if k != gid:
-                gm.addGeometryObject(g)
-        shift = {k: k - (k > gid) for k in range(old.ngeoms) if k != gid}
-        self._pairs = sorted((shift[i], shift[j]) for i, j in self._pairs if gid not in (i, j))
-        self._obstacles = {n: shift[g] for n, g in self._obstacles.items()}
-        self._geom = gm
+        self.core.removeObstacle(name)
         self._changed()
 
     @command
     def setObstaclePlacement(self, name: str, placement: Any) -> None:
-        """Move the obstacle ``name``: its new placement in the world, or in the frame it
-        is attached to (a ``pinocchio.SE3``, a 4x4 matrix or a position, m)."""
-        where = f"{self.className}({self.name}).setObstaclePlacement"
-        if name not in self._obstacles:
-            raise CommandError(
-                f"{where}: no obstacle named {name!r} (obstacles: "
-                f"{', '.join(self._obstacles) or 'none'})"
-            )
-        M = _placement(where, placement)
-        obj = self._geom.geometryObjects[self._obstacles[name]]
-        if obj.parentFrame:
-            M = self._model.frames[obj.parentFrame].placement * M
-        obj.placement = M
-        self._changed()
-
-    @command
-    def clearPairs(self) -> None:
-        """Check no pair (``addPair`` or ``addObstacle`` add some back)."""
-        self._pairs = []
+        """Move the obstacle ``name`` (its placement in the world or in its frame)."""
+        self.core.setObstaclePlacement(name, placement)
         self._changed()
 
     @command
     def listObstacles(self) -> list[str]:
         """The obstacles' names."""
-        return list(self._obstacles)
+        return self.core.listObstacles()
 
     @command
     def setDistances(self, safety: float, influence: float) -> None:
