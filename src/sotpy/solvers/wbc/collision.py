@@ -13,10 +13,15 @@ with the drift ``Jdot_d v = n^T (a_{p_B} - a_{p_A})``: the classical acceleratio
 witness points at zero joint acceleration, ``a_p = a_j + alpha_j x r + w_j x (w_j x r)``
 (``r = p - o_j``; ``a_j``, ``alpha_j``, ``w_j`` the joint's classical linear
 acceleration, angular acceleration and angular velocity in world axes, from the
-``RobotModel``'s kinematics at ``(q, v, 0)``). The rate of the normal and the sliding of
-the witness points are neglected: they add ``dn/dt . (dp_B/dt - dp_A/dt)`` to
-``d_ddot``, for two spheres ``|v_t|^2 / |c_B - c_A| >= 0`` (``v_t`` the tangential
-relative velocity), so the bound below stays on the safe side.
+``RobotModel``'s kinematics at ``(q, v, 0)``). This treats the witness points as
+points fixed to their bodies and the normal as constant: the rate of the normal and the
+motion of the witness points on the surfaces are neglected. For two spheres (radii
+``r_A``, ``r_B``, centres ``D`` apart) the exact acceleration is this drift plus
+``|v_t|^2 / D - r_A |w_A,perp|^2 - r_B |w_B,perp|^2`` (``v_t`` the centres' tangential
+relative velocity, ``w_perp`` a body's angular velocity across the normal):
+``tests/test_collision_torque.py`` checks that identity. The error is of either sign
+and second order in the velocities; the horizon's margin absorbs it at the speeds of a
+reach, but it is not a guarantee at high speed.
 
 The constraint asks the velocity damper ``d_dot >= -c (d - d_s)``, ``c = xi / (d_i -
 d_s)``, to hold one horizon ``h`` ahead, with ``d_dot(t + h) = d_dot + h d_ddot`` and
