@@ -282,3 +282,30 @@ def test_obstacles_add_and_remove_their_pairs():
     assert all("table" not in p for p in f.listPairs())
     f.removeObstacle("tool")
     assert f.getPairCount() == n
+
+
+def test_skipped_pairs_are_never_inside_the_influence_distance():
+    # along a random walk of the configuration (steps of up to 0.05 rad per joint, some
+    # big jumps), the rows are exactly the pairs an all-pairs computation finds under
+    # d_i, although most pairs are not queried at most ticks
+    r = _robot()
+    model = r.model
+    dyn = _dyn(r, r.halfSitting)
+    f = FeatureCollision("walk", dyn, geometry=r.collision_model, srdf=robotSrdf(r))
+    f.setDistances(0.0, 0.06)
+    q = r.halfSitting.copy()
+    queried = []
+    for k in range(60):
+        step = RNG.normal(size=model.nv) * (0.5 if k % 20 == 19 else 0.02)
+        step[:6] *= 0.1
+        q = pin.integrate(model, q, step)
+        dyn.position.value = q
+        rows = set(f.activePairs.value.astype(int).tolist())
+        queried.append(f.narrowPhaseCount.value)
+        exact = f.distances()
+        assert rows == set(np.flatnonzero(exact < 0.06).tolist()), k
+        np.testing.assert_allclose(np.sort(f.error.value), np.sort(exact[exact < 0.06]), atol=1e-7)
+        assert f.minDistance.value <= exact.min() + 1e-7
+        if exact.min() < 0.06:
+            assert f.minDistance.value == pytest.approx(exact.min(), abs=1e-7)
+    assert np.median(queried) < f.getPairCount() / 10

@@ -296,6 +296,11 @@ class CollisionPairs:
         self._rsum = radii[self._pa] + radii[self._pb] if self._pairs else np.zeros(0)
         self._joints = np.unique(self._gjoint)
         self._cmap = np.zeros((n, n), dtype=bool)
+        # temporal coherence (compute): lower bounds on the distances, and the joint
+        # rotations and sphere centres of the previous tick
+        self._lower = np.full(len(self._pairs), -math.inf)
+        self._prevR: np.ndarray | None = None
+        self._prevC = np.zeros((n, 3))
         self._jac = np.zeros((self._model.njoints, 6, self._model.nv))
 
     # -- the tick -----------------------------------------------------------------------
@@ -311,24 +316,35 @@ class CollisionPairs:
         R, o = H[:, :3, :3], H[:, :3, 3]
         gj = self._gjoint
         c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
-        dc = c[self._pa] - c[self._pb]
+        pa, pb = self._pa, self._pb
+        dc = c[pa] - c[pb]
         bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
-        near = np.flatnonzero(bound < di)
-        far = bound[bound >= di]
-        lowest = float(far.min()) if far.shape[0] else math.inf
+        # temporal coherence: a lower bound on each pair's distance, its last exact value
+        # minus how far any point of either shape can have moved since (see the doc)
+        lb = self._lower
+        if self._prevR is not None:
+            dR = R - self._prevR
+            rot = np.sqrt(np.einsum("jab,jab->j", dR, dR))[gj]  # |R' - R|_F >= |R' - R|_2
+            move = np.sqrt(np.einsum("gi,gi->g", c - self._prevC, c - self._prevC))
+            move += self._gradius * rot
+            lb -= move[pa] + move[pb]
+        self._prevR, self._prevC = R, c
+        np.maximum(lb, bound, out=lb)
+        near = np.flatnonzero(lb < di)
         if not near.shape[0]:
-            self._empty(lowest)
+            self._empty(float(lb.min()))
             return
-        # narrow phase on the near pairs only: one call, the others deactivated
+        # narrow phase on those pairs only: one call, the others deactivated
         pin.updateGeometryPlacements(model, data, gm, gd)
         cmap = self._cmap
         cmap[:] = False
-        cmap[self._pa[near], self._pb[near]] = True
+        cmap[pa[near], pb[near]] = True
         gd.setActiveCollisionPairs(gm, cmap, True)
         pin.computeDistances(gm, gd)
         results = gd.distanceResults
         dist = np.array([results[int(k)].min_distance for k in near])
-        lowest = min(lowest, float(dist.min()))
+        lb[near] = dist
+        lowest = float(lb.min())
         inside = dist < di
         rows = near[inside]
         m = rows.shape[0]
