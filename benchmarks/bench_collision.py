@@ -7,9 +7,9 @@ as one level, the right wrist 0.25 m forward and up, the posture; the same start
 and the CoM, on a ``FeatureCollision`` of every pair of the collision model that the
 SRDF leaves (883 pairs: convex hulls, adjacent links removed), with the default
 ``d_s = 0.01 m``, ``d_i = 0.05 m``, ``xi = 0.5 m/s``. Each tick it runs the broad phase on
-every pair (one NumPy pass over the bounding spheres), coal on those whose spheres come
-within ``d_i`` (the legs' pairs, about 60), and hands the pairs under ``d_i`` (about 21)
-to the solver as inequality rows.
+every pair (NumPy passes over the bounding spheres and the pairs' lower bounds from the
+previous ticks), coal on those that may be within ``d_i`` (the legs' pairs, about 21),
+and hands the pairs under ``d_i`` to the solver as inequality rows.
 
 One tick is ``device.increment(dt)`` (the graph, the solve, the integration), timed.
 The two run interleaved (``bench_sot.interleave``: turns of 100 ticks) so that a change

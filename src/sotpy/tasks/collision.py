@@ -48,9 +48,12 @@ A shape fixed to the world (an obstacle on no frame) has ``J_p = 0``.
 **Broad phase.** Each geometry has a bounding sphere (centre ``c_g`` in its joint's
 frame, radius ``r_g``, from coal's local AABB). Each tick, one vectorised NumPy pass
 puts the centres in the world (``R_j c_g + o_j``) and bounds every pair's distance from
-below by ``|c_A - c_B| - r_A - r_B``. Only the pairs whose bound is under the influence
-distance ``d_i`` reach the narrow phase (coal) and, if their distance is under ``d_i``,
-the task: pairs far apart cost one row of that array pass.
+below by ``|c_A - c_B| - r_A - r_B``. A second bound is the pair's last exact distance
+minus how far any point of either shape can have moved since (``|c' - c| + r_g |R' -
+R|_F`` per tick for a geometry, ``R`` its joint's rotation). Only the pairs whose larger
+bound is under the influence distance ``d_i`` reach the narrow phase (coal) and, if their
+distance is under ``d_i``, the task: pairs far apart cost one row of those array passes,
+and no pair under ``d_i`` is ever skipped.
 
 **The velocity damper** (Faverjon and Tournassoud, *A local based approach for path
 planning of manipulators with a high number of degrees of freedom*, ICRA 1987; Kanoun,
