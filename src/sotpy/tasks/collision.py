@@ -524,11 +524,14 @@ class CollisionPairs:
                 f"{', '.join(self._obstacles) or 'none'})"
             )
         M = _placement(where, placement)
-        obj = self._geom.geometryObjects[self._obstacles[name]]
+        gid = self._obstacles[name]
+        obj = self._geom.geometryObjects[gid]
         if obj.parentFrame:
             M = self._model.frames[obj.parentFrame].placement * M
         obj.placement = M
-        self._rebuild()
+        # its bounding sphere's centre moves with it; the pairs' bounds start afresh
+        self._gcenter[gid] = M.act(np.asarray(obj.geometry.aabb_center, dtype=float))
+        self._lower[:] = -math.inf
 
     def clearPairs(self) -> None:
         """Check no pair (``addPair`` or ``addObstacle`` add some back)."""
