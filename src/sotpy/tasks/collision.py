@@ -79,6 +79,7 @@ The acceleration-level form for the torque-level controller is
 
 from __future__ import annotations
 
+import ctypes
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -235,6 +236,38 @@ def _shape(where: str, shape: str, size: Sequence[float]) -> coal.ShapeBase:
     raise CommandError(f"{where}: a {shape} takes {expected[shape]}, got {size!r}")
 
 
+def _oMiView(data: pin.Data) -> np.ndarray | None:
+    """A read-only view (njoints x 12: the rotation column by column, then the
+    translation) on the memory of ``data.oMi``, or None when it is not laid out so
+    (checked: the rotations and translations Pinocchio hands out are views 96 bytes
+    apart, the translation 72 bytes after the rotation, and the view reads back every
+    placement)."""
+    L = data.oMi.tolist()
+    try:
+        rot = [M.rotation for M in L]
+        tra = [M.translation for M in L]
+        ar = [x.__array_interface__["data"][0] for x in rot]
+        at = [x.__array_interface__["data"][0] for x in tra]
+    except (AttributeError, TypeError, KeyError):  # pragma: no cover - another binding
+        return None
+    nj = len(L)
+    layout = all(not x.flags.owndata and x.flags.f_contiguous for x in rot) and all(
+        ar[k] == ar[0] + 96 * k and at[k] == ar[k] + 72 for k in range(nj)
+    )
+    if not layout or nj == 0:  # pragma: no cover - another Pinocchio
+        return None
+    buf = (ctypes.c_double * (12 * nj)).from_address(ar[0])
+    X = np.frombuffer(buf, dtype=np.float64).reshape(nj, 12)
+    X.flags.writeable = False
+    H = np.array([M.homogeneous for M in L])
+    if not (
+        np.array_equal(X[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1), H[:, :3, :3])
+        and np.array_equal(X[:, 9:], H[:, :3, 3])
+    ):  # pragma: no cover - another Pinocchio
+        return None
+    return X
+
+
 # -- the pairs --------------------------------------------------------------------------
 class CollisionPairs:
     """The geometry, the pairs and the per-tick computation of a collision model, with
@@ -298,15 +331,39 @@ class CollisionPairs:
         self._pb = np.array([p[1] for p in self._pairs], dtype=int)
         self._rsum = radii[self._pa] + radii[self._pb] if self._pairs else np.zeros(0)
         self._joints = np.unique(self._gjoint)
-        self._cmap = np.zeros((n, n), dtype=bool)
+        # the narrow phase: coal's results read through proxies made once (indexing the
+        # vector costs as much as reading), and the pairs coal computes (all active at
+        # first; compute toggles only those whose status changes)
+        self._results = [gd.distanceResults[k] for k in range(len(self._pairs))]
+        self._active = np.ones(len(self._pairs), dtype=bool)
         # temporal coherence (compute): lower bounds on the distances, and the joint
         # rotations and sphere centres of the previous tick
         self._lower = np.full(len(self._pairs), -math.inf)
         self._prevR: np.ndarray | None = None
         self._prevC = np.zeros((n, 3))
-        self._jac = np.zeros((self._model.njoints, 6, self._model.nv))
+        # the joints' supports: support[j, i] when velocity i moves joint j
+        model = self._model
+        support = np.zeros((model.njoints, model.nv), dtype=bool)
+        for j in range(1, model.njoints):
+            support[j] = support[model.parents[j]]
+            support[j, model.idx_vs[j] : model.idx_vs[j] + model.nvs[j]] = True
+        self._support = support
+        self._view: tuple[pin.Data, np.ndarray] | None = None
 
     # -- the tick -----------------------------------------------------------------------
+    def _placements(self, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
+        """The joint rotations ``R`` (njoints x 3 x 3) and origins ``o`` (njoints x 3) of
+        ``data``, world: read-only views on ``data.oMi`` when its memory has the layout
+        checked by :func:`_oMiView` (one array, no accessor per joint), else copies."""
+        view = self._view
+        if view is None or view[0] is not data:
+            self._view = view = (data, _oMiView(data))
+        X = view[1]
+        if X is None:
+            H = np.array([M.homogeneous for M in data.oMi])
+            return H[:, :3, :3], H[:, :3, 3]
+        return X[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1), X[:, 9:]
+
     def compute(self, data: pin.Data, di: float) -> None:
         """The tick: broad phase, narrow phase and rows at ``data``'s kinematics (joint
         placements and Jacobians computed), for the influence distance ``di`` (m)."""
@@ -315,8 +372,7 @@ class CollisionPairs:
             self._empty()
             return
         # broad phase: sphere centres in the world, one pass over the pairs
-        H = np.array([M.homogeneous for M in data.oMi])  # joint placements, world
-        R, o = H[:, :3, :3], H[:, :3, 3]
+        R, o = self._placements(data)
         gj = self._gjoint
         c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
         pa, pb = self._pa, self._pb
@@ -331,21 +387,26 @@ class CollisionPairs:
             move = np.sqrt(np.einsum("gi,gi->g", c - self._prevC, c - self._prevC))
             move += self._gradius * rot
             lb -= move[pa] + move[pb]
-        self._prevR, self._prevC = R, c
+        self._prevR, self._prevC = R.copy(), c
         np.maximum(lb, bound, out=lb)
-        near = np.flatnonzero(lb < di)
+        sel = lb < di
+        near = np.flatnonzero(sel)
         if not near.shape[0]:
             self._empty(float(lb.min()))
             return
-        # narrow phase on those pairs only: one call, the others deactivated
+        # narrow phase on those pairs only: one call, the others deactivated (only the
+        # pairs whose status changed since the last tick are toggled)
         pin.updateGeometryPlacements(model, data, gm, gd)
-        cmap = self._cmap
-        cmap[:] = False
-        cmap[pa[near], pb[near]] = True
-        gd.setActiveCollisionPairs(gm, cmap, True)
+        active = self._active
+        for k in np.flatnonzero(sel != active):
+            if sel[k]:
+                gd.activateCollisionPair(int(k))
+            else:
+                gd.deactivateCollisionPair(int(k))
+        active[:] = sel
         pin.computeDistances(gm, gd)
-        results = gd.distanceResults
-        dist = np.array([results[int(k)].min_distance for k in near])
+        results = self._results
+        dist = np.array([results[k].min_distance for k in near.tolist()])
         lb[near] = dist
         lowest = float(lb.min())
         inside = dist < di
@@ -357,34 +418,29 @@ class CollisionPairs:
             return
         self.minDistance, self.narrow = lowest, int(near.shape[0])
         self.rowPairs, self.rowD = rows, dist[inside]
-        # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + ((p - o_j) x n)^T J_ang
+        # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + (p x n)^T J_ang with J the
+        # joint's Jacobian in the world frame (data.J restricted to the joint's support)
         n = np.empty((m, 3))
         pA = np.empty((m, 3))
         pB = np.empty((m, 3))
-        for r, k in enumerate(rows):
-            res = results[int(k)]
+        for r, k in enumerate(rows.tolist()):
+            res = results[k]
             n[r] = res.normal
             pA[r] = res.getNearestPoint1()
             pB[r] = res.getNearestPoint2()
-        jA, jB = self._gjoint[self._pa[rows]], self._gjoint[self._pb[rows]]
-        used = np.unique(np.concatenate((jA, jB)))
-        Jall = self._jac
-        LWA = pin.LOCAL_WORLD_ALIGNED
-        for j in used:
-            Jall[j] = pin.getJointJacobian(model, data, int(j), LWA) if j else 0.0
+        jA, jB = gj[pa[rows]], gj[pb[rows]]
         coef = np.empty((2, m, 6))
-        for side, (jj, p) in enumerate(((jA, pA), (jB, pB))):
+        for side, p in enumerate((pA, pB)):
             coef[side, :, :3] = n
-            rr = p - o[jj]  # (p - o_j) x n, written out (np.cross costs more here)
-            coef[side, :, 3] = rr[:, 1] * n[:, 2] - rr[:, 2] * n[:, 1]
-            coef[side, :, 4] = rr[:, 2] * n[:, 0] - rr[:, 0] * n[:, 2]
-            coef[side, :, 5] = rr[:, 0] * n[:, 1] - rr[:, 1] * n[:, 0]
-        coef[0] *= -1.0
-        Js = Jall[np.concatenate((jA, jB))].reshape(2, m, 6, model.nv)
-        self.rowJ = np.einsum("skc,skcv->kv", coef, Js)
+            # p x n, written out (np.cross costs more here)
+            coef[side, :, 3] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
+            coef[side, :, 4] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
+            coef[side, :, 5] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]
+        J = data.J
+        sup = self._support
+        self.rowJ = np.where(sup[jB], coef[1] @ J, 0.0) - np.where(sup[jA], coef[0] @ J, 0.0)
         self.rowNormal, self.rowPointA, self.rowPointB = n, pA, pB
         self.rowJointA, self.rowJointB = jA, jB
-        self._origins = o
 
     # -- queries ------------------------------------------------------------------------
     def distances(self, data: pin.Data) -> np.ndarray:
