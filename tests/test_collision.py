@@ -309,3 +309,40 @@ def test_skipped_pairs_are_never_inside_the_influence_distance():
         if exact.min() < 0.06:
             assert f.minDistance.value == pytest.approx(exact.min(), abs=1e-7)
     assert np.median(queried) < f.getPairCount() / 10
+
+
+def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
+    # the tick's fast path (the read-only view on data.oMi, the compiled broad phase and
+    # Jacobian rows) against the NumPy twins on copies of data.oMi, along a random walk
+    # with big jumps: the same rows, distances, witness points and normals bit for bit,
+    # the same Jacobian to rounding, the same pairs through the narrow phase
+    from sotpy.tasks import _collisionkernels as kernels
+    from sotpy.tasks import collision
+
+    r = _robot()
+    model, srdf = r.model, robotSrdf(r)
+    fast = collision.CollisionPairs(model, r.collision_model, srdf)
+    ref = collision.CollisionPairs(model, r.collision_model, srdf)
+    fast_data, ref_data = model.createData(), model.createData()
+    q = r.halfSitting.copy()
+    for k in range(80):
+        step = RNG.normal(size=model.nv) * (0.5 if k % 20 == 19 else 0.02)
+        step[:6] *= 0.1
+        q = pin.integrate(model, q, step)
+        for d in (fast_data, ref_data):
+            pin.computeJointJacobians(model, d, q)
+        fast.compute(fast_data, 0.06)
+        with monkeypatch.context() as m:
+            m.setattr(kernels, "broad_phase", None)
+            m.setattr(kernels, "jacobian_rows", None)
+            m.setattr(collision, "_oMiView", lambda data: None)
+            ref.compute(ref_data, 0.06)
+        assert np.array_equal(fast.rowPairs, ref.rowPairs), k
+        assert np.array_equal(fast.rowD, ref.rowD)
+        for a in ("rowNormal", "rowPointA", "rowPointB", "rowJointA", "rowJointB"):
+            assert np.array_equal(getattr(fast, a), getattr(ref, a)), a
+        np.testing.assert_allclose(fast.rowJ, ref.rowJ, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(fast._lower, ref._lower, rtol=0, atol=1e-12)
+        assert fast.minDistance == pytest.approx(ref.minDistance, abs=1e-12)
+    if kernels.broad_phase is not None:
+        assert fast._view is not None and fast._view[1] is not None

@@ -89,9 +89,11 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from .. import _jit
 from ..errors import CommandError, EntityError, SignalTypeError
 from ..graph import DOUBLE, INT, VECTOR, Input, Output, command, plug
 from ..graph.signal import Signal
+from . import _collisionkernels as _kernels
 from .features import FeatureAbstract
 from .task import TaskAbstract
 
@@ -298,6 +300,7 @@ class CollisionPairs:
         self._pairs = collisionPairs(model, self._geom, srdf)
         self._empty()
         self._rebuild()
+        _jit.prepare("the collision pass", ["sotpy.tasks._collisionkernels"])
 
     def _empty(self, lowest: float = math.inf) -> None:
         model = self._model
@@ -339,8 +342,11 @@ class CollisionPairs:
         # temporal coherence (compute): lower bounds on the distances, and the joint
         # rotations and sphere centres of the previous tick
         self._lower = np.full(len(self._pairs), -math.inf)
-        self._prevR: np.ndarray | None = None
+        self._coherent = False
+        self._prevX = np.zeros((self._model.njoints, 12))
         self._prevC = np.zeros((n, 3))
+        self._c = np.zeros((n, 3))
+        self._sel = np.zeros(len(self._pairs), dtype=bool)
         # the joints' supports: support[j, i] when velocity i moves joint j
         model = self._model
         support = np.zeros((model.njoints, model.nv), dtype=bool)
@@ -351,18 +357,42 @@ class CollisionPairs:
         self._view: tuple[pin.Data, np.ndarray] | None = None
 
     # -- the tick -----------------------------------------------------------------------
-    def _placements(self, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
-        """The joint rotations ``R`` (njoints x 3 x 3) and origins ``o`` (njoints x 3) of
-        ``data``, world: read-only views on ``data.oMi`` when its memory has the layout
-        checked by :func:`_oMiView` (one array, no accessor per joint), else copies."""
+    def _placements(self, data: pin.Data) -> np.ndarray:
+        """The joint placements of ``data`` (world; njoints x 12: the rotation column by
+        column, then the translation): a read-only view on ``data.oMi`` when its memory
+        has the layout checked by :func:`_oMiView` (one array, no accessor per joint),
+        else a copy."""
         view = self._view
         if view is None or view[0] is not data:
             self._view = view = (data, _oMiView(data))
-        X = view[1]
-        if X is None:
-            H = np.array([M.homogeneous for M in data.oMi])
-            return H[:, :3, :3], H[:, :3, 3]
-        return X[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1), X[:, 9:]
+        if view[1] is not None:
+            return view[1]
+        H = np.array([M.homogeneous for M in data.oMi])
+        return np.concatenate((H[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), H[:, :3, 3]), 1)
+
+    def _broadPhase(self, X: np.ndarray, di: float) -> np.ndarray:
+        """The broad phase (NumPy; :func:`._collisionkernels.broad_phase` is its compiled
+        twin): the pairs' lower bounds into ``_lower``, the selection into ``_sel``."""
+        R, o = X[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1), X[:, 9:]
+        gj = self._gjoint
+        c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
+        pa, pb = self._pa, self._pb
+        dc = c[pa] - c[pb]
+        bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
+        # temporal coherence: a lower bound on each pair's distance, its last exact value
+        # minus how far any point of either shape can have moved since (see the doc)
+        lb = self._lower
+        if self._coherent:
+            dR = X[:, :9] - self._prevX[:, :9]
+            rot = np.sqrt(np.einsum("ja,ja->j", dR, dR))[gj]  # |R' - R|_F >= |R' - R|_2
+            move = np.sqrt(np.einsum("gi,gi->g", c - self._prevC, c - self._prevC))
+            move += self._gradius * rot
+            lb -= move[pa] + move[pb]
+        self._prevX[:] = X
+        self._prevC[:] = c
+        np.maximum(lb, bound, out=lb)
+        np.less(lb, di, out=self._sel)
+        return self._sel
 
     def compute(self, data: pin.Data, di: float) -> None:
         """The tick: broad phase, narrow phase and rows at ``data``'s kinematics (joint
@@ -372,24 +402,24 @@ class CollisionPairs:
             self._empty()
             return
         # broad phase: sphere centres in the world, one pass over the pairs
-        R, o = self._placements(data)
-        gj = self._gjoint
-        c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
-        pa, pb = self._pa, self._pb
-        dc = c[pa] - c[pb]
-        bound = np.sqrt(np.einsum("ij,ij->i", dc, dc)) - self._rsum
-        # temporal coherence: a lower bound on each pair's distance, its last exact value
-        # minus how far any point of either shape can have moved since (see the doc)
+        X = self._placements(data)
         lb = self._lower
-        if self._prevR is not None:
-            dR = R - self._prevR
-            rot = np.sqrt(np.einsum("jab,jab->j", dR, dR))[gj]  # |R' - R|_F >= |R' - R|_2
-            move = np.sqrt(np.einsum("gi,gi->g", c - self._prevC, c - self._prevC))
-            move += self._gradius * rot
-            lb -= move[pa] + move[pb]
-        self._prevR, self._prevC = R.copy(), c
-        np.maximum(lb, bound, out=lb)
-        sel = lb < di
+        sel = self._sel
+        done = False
+        if _kernels.broad_phase is not None:
+            try:
+                _kernels.broad_phase(
+                    X, self._gjoint, self._gcenter, self._gradius, self._pa, self._pb,
+                    self._rsum, lb, self._prevX, self._prevC, self._c, self._coherent,
+                    float(di), sel,
+                )  # fmt: skip
+                done = True
+            except TypeError as exc:  # pragma: no cover - types not compiled for
+                _jit.refused(self.who, exc)
+                _kernels.broad_phase = None
+        if not done:
+            self._broadPhase(X, di)
+        self._coherent = True
         near = np.flatnonzero(sel)
         if not near.shape[0]:
             self._empty(float(lb.min()))
@@ -428,19 +458,41 @@ class CollisionPairs:
             n[r] = res.normal
             pA[r] = res.getNearestPoint1()
             pB[r] = res.getNearestPoint2()
-        jA, jB = gj[pa[rows]], gj[pb[rows]]
-        coef = np.empty((2, m, 6))
+        gj = self._gjoint
+        jA, jB = gj[self._pa[rows]], gj[self._pb[rows]]
+        J = data.J
+        if _kernels.jacobian_rows is not None:
+            try:
+                self.rowJ = np.empty((m, model.nv))
+                _kernels.jacobian_rows(n, pA, pB, jA, jB, J, self._support, self.rowJ)
+            except TypeError as exc:  # pragma: no cover - types not compiled for
+                _jit.refused(self.who, exc)
+                _kernels.jacobian_rows = None
+        if _kernels.jacobian_rows is None:
+            self.rowJ = self._jacobianRows(n, pA, pB, jA, jB, J)
+        self.rowNormal, self.rowPointA, self.rowPointB = n, pA, pB
+        self.rowJointA, self.rowJointB = jA, jB
+
+    def _jacobianRows(
+        self,
+        n: np.ndarray,
+        pA: np.ndarray,
+        pB: np.ndarray,
+        jA: np.ndarray,
+        jB: np.ndarray,
+        J: np.ndarray,
+    ) -> np.ndarray:
+        """``J_d`` of the rows (NumPy; :func:`._collisionkernels.jacobian_rows` is its
+        compiled twin)."""
+        coef = np.empty((2, n.shape[0], 6))
         for side, p in enumerate((pA, pB)):
             coef[side, :, :3] = n
             # p x n, written out (np.cross costs more here)
             coef[side, :, 3] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
             coef[side, :, 4] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
             coef[side, :, 5] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]
-        J = data.J
         sup = self._support
-        self.rowJ = np.where(sup[jB], coef[1] @ J, 0.0) - np.where(sup[jA], coef[0] @ J, 0.0)
-        self.rowNormal, self.rowPointA, self.rowPointB = n, pA, pB
-        self.rowJointA, self.rowJointB = jA, jB
+        return np.where(sup[jB], coef[1] @ J, 0.0) - np.where(sup[jA], coef[0] @ J, 0.0)
 
     # -- queries ------------------------------------------------------------------------
     def distances(self, data: pin.Data) -> np.ndarray:
