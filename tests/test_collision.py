@@ -312,8 +312,9 @@ def test_skipped_pairs_are_never_inside_the_influence_distance():
 
 
 def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
-    # the tick's fast path (the read-only view on data.oMi, the compiled broad phase and
-    # Jacobian rows) against the NumPy twins on copies of data.oMi, along a random walk
+    # the tick's fast path (the read-only views on data.oMi and on coal's results, the
+    # compiled broad phase and Jacobian rows) against the NumPy twins on copies of
+    # data.oMi and coal's accessors, along a random walk
     # with big jumps: the same rows, distances, witness points and normals bit for bit,
     # the same Jacobian to rounding, the same pairs through the narrow phase
     from sotpy.tasks import _collisionkernels as kernels
@@ -322,7 +323,10 @@ def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
     r = _robot()
     model, srdf = r.model, robotSrdf(r)
     fast = collision.CollisionPairs(model, r.collision_model, srdf)
-    ref = collision.CollisionPairs(model, r.collision_model, srdf)
+    with monkeypatch.context() as m:  # coal's results through their accessors
+        m.setattr(collision, "_resultsView", lambda results: None)
+        ref = collision.CollisionPairs(model, r.collision_model, srdf)
+    assert ref._resView is None
     fast_data, ref_data = model.createData(), model.createData()
     q = r.halfSitting.copy()
     for k in range(80):
@@ -344,5 +348,6 @@ def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
         np.testing.assert_allclose(fast.rowJ, ref.rowJ, rtol=0, atol=1e-14)
         np.testing.assert_allclose(fast._lower, ref._lower, rtol=0, atol=1e-12)
         assert fast.minDistance == pytest.approx(ref.minDistance, abs=1e-12)
+    assert fast._resView is not None and fast._resChecked
     if kernels.broad_phase is not None:
         assert fast._view is not None and fast._view[1] is not None

@@ -270,6 +270,46 @@ def _oMiView(data: pin.Data) -> np.ndarray | None:
     return X
 
 
+def _resultsView(results: list[Any]) -> np.ndarray | None:
+    """A read-only view (pairs x 10: ``min_distance``, ``normal``, the two nearest
+    points) on the memory of coal's distance results (``results``: the proxies of one
+    ``GeometryData.distanceResults``), or None when the normals coal hands out are not
+    views the same number of bytes apart. The order of the fields in that memory is
+    checked against the accessors by :func:`_resultsMatch`."""
+    if not results:
+        return None
+    try:
+        normals = [r.normal for r in results]
+        addr = [x.__array_interface__["data"][0] for x in normals]
+    except (AttributeError, TypeError, KeyError):  # pragma: no cover - another binding
+        return None
+    stride = addr[1] - addr[0] if len(addr) > 1 else 160
+    if stride < 80 or stride % 8 or any(x.flags.owndata for x in normals):
+        return None  # pragma: no cover - another coal
+    if any(a != addr[0] + stride * k for k, a in enumerate(addr)):
+        return None  # pragma: no cover
+    start = addr[0] - 8  # min_distance, just before the normal
+    size = (stride * (len(addr) - 1)) // 8 + 10
+    buf = (ctypes.c_double * size).from_address(start)
+    flat = np.frombuffer(buf, dtype=np.float64)
+    view = np.lib.stride_tricks.as_strided(
+        flat, shape=(len(addr), 10), strides=(stride, 8), writeable=False
+    )
+    return view
+
+
+def _resultsMatch(view: np.ndarray, results: list[Any], pairs: np.ndarray) -> bool:
+    """Whether ``view`` reads back what coal's accessors give for ``pairs``."""
+    for k in pairs.tolist():
+        r = results[k]
+        expected = np.concatenate(
+            ([r.min_distance], r.normal, r.getNearestPoint1(), r.getNearestPoint2())
+        )
+        if not np.array_equal(view[k], expected):
+            return False
+    return True
+
+
 # -- the pairs --------------------------------------------------------------------------
 class CollisionPairs:
     """The geometry, the pairs and the per-tick computation of a collision model, with
@@ -338,6 +378,10 @@ class CollisionPairs:
         # vector costs as much as reading), and the pairs coal computes (all active at
         # first; compute toggles only those whose status changes)
         self._results = [gd.distanceResults[k] for k in range(len(self._pairs))]
+        # ... or through one read-only array on their memory when it has the layout
+        # :func:`_resultsView` checks (the values are checked at the first computation)
+        self._resView = _resultsView(self._results)
+        self._resChecked = False
         self._active = np.ones(len(self._pairs), dtype=bool)
         # temporal coherence (compute): lower bounds on the distances, and the joint
         # rotations and sphere centres of the previous tick
@@ -435,8 +479,15 @@ class CollisionPairs:
                 gd.deactivateCollisionPair(int(k))
         active[:] = sel
         pin.computeDistances(gm, gd)
-        results = self._results
-        dist = np.array([results[k].min_distance for k in near.tolist()])
+        results, view = self._results, self._resView
+        if view is not None and not self._resChecked:
+            self._resChecked = True
+            if not _resultsMatch(view, results, near):  # pragma: no cover - another coal
+                self._resView = view = None
+        if view is not None:
+            dist = view[near, 0]
+        else:
+            dist = np.array([results[k].min_distance for k in near.tolist()])
         lb[near] = dist
         lowest = float(lb.min())
         inside = dist < di
@@ -450,14 +501,18 @@ class CollisionPairs:
         self.rowPairs, self.rowD = rows, dist[inside]
         # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + (p x n)^T J_ang with J the
         # joint's Jacobian in the world frame (data.J restricted to the joint's support)
-        n = np.empty((m, 3))
-        pA = np.empty((m, 3))
-        pB = np.empty((m, 3))
-        for r, k in enumerate(rows.tolist()):
-            res = results[k]
-            n[r] = res.normal
-            pA[r] = res.getNearestPoint1()
-            pB[r] = res.getNearestPoint2()
+        if view is not None:
+            res = view[rows]
+            n, pA, pB = (np.ascontiguousarray(res[:, i : i + 3]) for i in (1, 4, 7))
+        else:
+            n = np.empty((m, 3))
+            pA = np.empty((m, 3))
+            pB = np.empty((m, 3))
+            for r, k in enumerate(rows.tolist()):
+                res = results[k]
+                n[r] = res.normal
+                pA[r] = res.getNearestPoint1()
+                pB[r] = res.getNearestPoint2()
         gj = self._gjoint
         jA, jB = gj[self._pa[rows]], gj[self._pb[rows]]
         J = data.J
