@@ -21,12 +21,30 @@ from .._jit import kernel
 
 
 def _broad_phase(
-    X, gj, gcenter, gradius, pa, pb, rsum, lower, prevX, prevC, c, coherent, di, sel
+    X,
+    gj,
+    gcenter,
+    gradius,
+    pa,
+    pb,
+    rsum,
+    lower,
+    prevX,
+    prevC,
+    c,
+    coherent,
+    di,
+    sel,
+    near,
+    toggle,
 ):  # pragma: no cover - compiled (the NumPy twin is in collision.py)
     """``X``: the joint placements (njoints x 12, rotation column by column then the
     translation); ``c`` <- the sphere centres; ``lower`` <- the pairs' lower bounds;
-    ``sel[k]`` <- ``lower[k] < di``; ``prevX``, ``prevC`` <- ``X``, ``c`` (with
-    ``coherent``, the last tick's values are used first). Returns the selected count."""
+    ``prevX``, ``prevC`` <- ``X``, ``c`` (with ``coherent``, the last tick's values are
+    used first). ``sel`` holds the last selection: ``sel[k]`` <- ``lower[k] < di``, the
+    pairs selected into ``near[:count]``, those whose selection changed into
+    ``toggle[:changed]``. Returns ``(count, changed, lowest)``, ``lowest`` the smallest
+    bound of the pairs not selected (inf when none)."""
     nj = X.shape[0]
     ng = gj.shape[0]
     rot = np.zeros(nj)
@@ -49,6 +67,8 @@ def _broad_phase(
             d2 = c[g, 2] - prevC[g, 2]
             move[g] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + gradius[g] * rot[j]
     count = 0
+    changed = 0
+    lowest = np.inf
     for k in range(pa.shape[0]):
         a, b = pa[k], pb[k]
         d0 = c[a, 0] - c[b, 0]
@@ -62,12 +82,18 @@ def _broad_phase(
             lb = bound
         lower[k] = lb
         s = lb < di
+        if s != sel[k]:
+            toggle[changed] = k
+            changed += 1
         sel[k] = s
         if s:
+            near[count] = k
             count += 1
+        elif lb < lowest:
+            lowest = lb
     prevX[:, :] = X
     prevC[:, :] = c
-    return count
+    return count, changed, lowest
 
 
 def _jacobian_rows(n, pA, pB, jA, jB, J, support, out):  # pragma: no cover - compiled
@@ -119,16 +145,21 @@ def warm_up() -> None:
     r1 = ro(np.zeros(ng))
     pairs = ro(np.array([0], dtype=np.int64))
     rsum = ro(np.zeros(npairs))
+    idx = np.zeros(npairs, dtype=np.int64)
     for coherent in (False, True):
         broad_phase(
             X, ints, g3, r1, pairs, pairs, rsum, np.zeros(npairs), np.zeros((nj, 12)),
             np.zeros((ng, 3)), np.zeros((ng, 3)), coherent, 0.05, np.zeros(npairs, dtype=np.bool_),
+            idx, idx,
         )  # fmt: skip
-    m = ro(np.zeros((1, 3)))
     jac = np.zeros((6, nv), order="F")  # data.J: column-major
     support = ro(np.zeros((nj, nv), dtype=np.bool_))
-    for J in (ro(jac), jac, ro(np.zeros((6, nv)))):
-        jacobian_rows(m, m, m, pairs, pairs, J, support, np.zeros((1, nv)))
+    # the witness data: columns of the results' rows (strided), or C-order arrays
+    w = np.zeros((2, 10))[:, 1:4]  # two rows: a strided (not contiguous) view
+    two = ro(np.zeros(2, dtype=np.int64))
+    for m in (ro(w), w, ro(np.zeros((2, 3)))):
+        for J in (ro(jac), jac, ro(np.zeros((6, nv)))):
+            jacobian_rows(m, m, m, two, two, J, support, np.zeros((2, nv)))
     for k in (broad_phase, jacobian_rows):
         k.disable_compile()
     _warm.append(True)

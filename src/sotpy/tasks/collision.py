@@ -184,6 +184,14 @@ def collisionPairs(
     return sorted(pairs)
 
 
+def _goodDistances(safety: Any, influence: Any) -> bool:
+    """The common case of :func:`checkDamper` without a gain, checked without building
+    its message: two floats with ``0 <= d_s < d_i < inf``."""
+    return (
+        type(safety) is float and type(influence) is float and 0.0 <= safety < influence < math.inf
+    )
+
+
 def checkDamper(where: str, safety: float, influence: float, gain: float | None) -> None:
     """Refuse an inconsistent damper: ``d_s >= 0``, ``d_i > d_s``, ``xi > 0``, all
     finite. ``where`` names the entity and the signals in the message."""
@@ -382,7 +390,6 @@ class CollisionPairs:
         # :func:`_resultsView` checks (the values are checked at the first computation)
         self._resView = _resultsView(self._results)
         self._resChecked = False
-        self._active = np.ones(len(self._pairs), dtype=bool)
         # temporal coherence (compute): lower bounds on the distances, and the joint
         # rotations and sphere centres of the previous tick
         self._lower = np.full(len(self._pairs), -math.inf)
@@ -390,7 +397,9 @@ class CollisionPairs:
         self._prevX = np.zeros((self._model.njoints, 12))
         self._prevC = np.zeros((n, 3))
         self._c = np.zeros((n, 3))
-        self._sel = np.zeros(len(self._pairs), dtype=bool)
+        self._sel = np.ones(len(self._pairs), dtype=bool)  # all active in a new gd
+        self._near = np.zeros(len(self._pairs), dtype=np.int64)
+        self._toggle = np.zeros(len(self._pairs), dtype=np.int64)
         # the joints' supports: support[j, i] when velocity i moves joint j
         model = self._model
         support = np.zeros((model.njoints, model.nv), dtype=bool)
@@ -414,9 +423,11 @@ class CollisionPairs:
         H = np.array([M.homogeneous for M in data.oMi])
         return np.concatenate((H[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), H[:, :3, 3]), 1)
 
-    def _broadPhase(self, X: np.ndarray, di: float) -> np.ndarray:
+    def _broadPhase(self, X: np.ndarray, di: float) -> tuple[np.ndarray, np.ndarray, float]:
         """The broad phase (NumPy; :func:`._collisionkernels.broad_phase` is its compiled
-        twin): the pairs' lower bounds into ``_lower``, the selection into ``_sel``."""
+        twin): the pairs' lower bounds into ``_lower``, the selection into ``_sel``;
+        the selected pairs, those whose selection changed and the smallest bound of the
+        others (inf when none)."""
         R, o = X[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1), X[:, 9:]
         gj = self._gjoint
         c = np.einsum("gij,gj->gi", R[gj], self._gcenter) + o[gj]
@@ -435,8 +446,11 @@ class CollisionPairs:
         self._prevX[:] = X
         self._prevC[:] = c
         np.maximum(lb, bound, out=lb)
-        np.less(lb, di, out=self._sel)
-        return self._sel
+        sel = lb < di
+        toggle = np.flatnonzero(sel != self._sel)
+        self._sel[:] = sel
+        rest = lb[~sel]
+        return np.flatnonzero(sel), toggle, float(rest.min()) if rest.shape[0] else math.inf
 
     def compute(self, data: pin.Data, di: float) -> None:
         """The tick: broad phase, narrow phase and rows at ``data``'s kinematics (joint
@@ -449,35 +463,32 @@ class CollisionPairs:
         X = self._placements(data)
         lb = self._lower
         sel = self._sel
-        done = False
-        if _kernels.broad_phase is not None:
+        kernel = _kernels.broad_phase
+        if kernel is not None:
             try:
-                _kernels.broad_phase(
+                count, changed, lowest = kernel(
                     X, self._gjoint, self._gcenter, self._gradius, self._pa, self._pb,
                     self._rsum, lb, self._prevX, self._prevC, self._c, self._coherent,
-                    float(di), sel,
+                    float(di), sel, self._near, self._toggle,
                 )  # fmt: skip
-                done = True
+                near, toggle = self._near[:count], self._toggle[:changed]
             except TypeError as exc:  # pragma: no cover - types not compiled for
                 _jit.refused(self.who, exc)
-                _kernels.broad_phase = None
-        if not done:
-            self._broadPhase(X, di)
+                _kernels.broad_phase = kernel = None
+        if kernel is None:
+            near, toggle, lowest = self._broadPhase(X, di)
         self._coherent = True
-        near = np.flatnonzero(sel)
-        if not near.shape[0]:
-            self._empty(float(lb.min()))
-            return
-        # narrow phase on those pairs only: one call, the others deactivated (only the
-        # pairs whose status changed since the last tick are toggled)
-        pin.updateGeometryPlacements(model, data, gm, gd)
-        active = self._active
-        for k in np.flatnonzero(sel != active):
+        # narrow phase on the selected pairs only: one call, the others deactivated (only
+        # the pairs whose selection changed since the last tick are toggled)
+        for k in toggle.tolist():
             if sel[k]:
-                gd.activateCollisionPair(int(k))
+                gd.activateCollisionPair(k)
             else:
-                gd.deactivateCollisionPair(int(k))
-        active[:] = sel
+                gd.deactivateCollisionPair(k)
+        if not near.shape[0]:
+            self._empty(lowest)
+            return
+        pin.updateGeometryPlacements(model, data, gm, gd)
         pin.computeDistances(gm, gd)
         results, view = self._results, self._resView
         if view is not None and not self._resChecked:
@@ -485,11 +496,12 @@ class CollisionPairs:
             if not _resultsMatch(view, results, near):  # pragma: no cover - another coal
                 self._resView = view = None
         if view is not None:
-            dist = view[near, 0]
+            res = view[near]
+            dist = res[:, 0]
         else:
             dist = np.array([results[k].min_distance for k in near.tolist()])
         lb[near] = dist
-        lowest = float(lb.min())
+        lowest = min(lowest, float(dist.min()))
         inside = dist < di
         rows = near[inside]
         m = rows.shape[0]
@@ -502,8 +514,8 @@ class CollisionPairs:
         # J_d = n^T (J_pB - J_pA), n^T J_p = n^T J_lin + (p x n)^T J_ang with J the
         # joint's Jacobian in the world frame (data.J restricted to the joint's support)
         if view is not None:
-            res = view[rows]
-            n, pA, pB = (np.ascontiguousarray(res[:, i : i + 3]) for i in (1, 4, 7))
+            res = res[inside]
+            n, pA, pB = res[:, 1:4], res[:, 4:7], res[:, 7:10]
         else:
             n = np.empty((m, 3))
             pA = np.empty((m, 3))
@@ -750,13 +762,14 @@ class FeatureCollision(FeatureAbstract):
     def collisions(self, t: int, _kinematics: int, ds: float, di: float) -> int:
         """The pass: broad phase, narrow phase and rows of the tick (its value is the
         tick); every other output reads it."""
-        checkDamper(
-            f"{self.className}({self.name}): {self.safetyDistance.name}, "
-            f"{self.influenceDistance.name}",
-            ds,
-            di,
-            None,
-        )
+        if not _goodDistances(ds, di):
+            checkDamper(
+                f"{self.className}({self.name}): {self.safetyDistance.name}, "
+                f"{self.influenceDistance.name}",
+                ds,
+                di,
+                None,
+            )
         self.core.compute(self._data, di)
         return t
 
@@ -936,13 +949,14 @@ class TaskCollision(TaskAbstract):
         parts = []
         for k, f in enumerate(self._wired):
             d, ds, di = values[3 * k : 3 * k + 3]
-            checkDamper(
-                f"{self.className}({self.name}): {f.safetyDistance.name}, "
-                f"{f.influenceDistance.name}",
-                ds,
-                di,
-                None,
-            )
+            if not _goodDistances(ds, di):
+                checkDamper(
+                    f"{self.className}({self.name}): {f.safetyDistance.name}, "
+                    f"{f.influenceDistance.name}",
+                    ds,
+                    di,
+                    None,
+                )
             parts.append(-xi * (d - ds) / (di - ds))
         return np.concatenate(parts) if parts else np.zeros(0)
 
