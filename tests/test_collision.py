@@ -339,7 +339,7 @@ def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
         fast.compute(fast_data, 0.06)
         with monkeypatch.context() as m:
             m.setattr(kernels, "broad_phase", None)
-            m.setattr(kernels, "jacobian_rows", None)
+            m.setattr(kernels, "narrow_rows", None)
             m.setattr(collision, "_oMiView", lambda data: None)
             ref.compute(ref_data, 0.06)
         assert np.array_equal(fast.rowPairs, ref.rowPairs), k
@@ -352,4 +352,4 @@ def test_compiled_pass_and_placement_view_match_the_numpy_path(monkeypatch):
     assert fast._resView is not None and fast._resChecked
     assert fast._view is not None and fast._view[1] is not None
     if _jit.ENABLED:  # the kernels took every call (none refused its types)
-        assert kernels.broad_phase is not None and kernels.jacobian_rows is not None
+        assert kernels.broad_phase is not None and kernels.narrow_rows is not None

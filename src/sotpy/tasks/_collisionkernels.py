@@ -5,10 +5,12 @@ r"""Compiled kernels of the collision pass (internal to :mod:`sotpy.tasks.collis
 centres in the world, each pair's sphere bound ``|c_A - c_B| - r_A - r_B``, its lower
 bound from the last tick (minus how far either shape can have moved since: ``|c' - c| +
 r_g |R' - R|_F``), the larger of the two, and the selection ``bound < d_i``.
-:func:`jacobian_rows` writes ``J_d = n^T (J_pB - J_pA)`` with ``n^T J_p = n^T J_lin +
-(p x n)^T J_ang`` (``J``: ``data.J``, the joints' Jacobians in the world frame, restricted
-to each joint's support). The NumPy twins are the passes written in ``collision.py``;
-the tests compare both paths along a random walk.
+:func:`narrow_rows`, after coal, keeps the pairs under ``d_i`` (their distances, normals
+and witness points, read from coal's results) and writes their ``J_d = n^T (J_pB -
+J_pA)`` with ``n^T J_p = n^T J_lin + (p x n)^T J_ang`` (``J``: ``data.J``, the joints'
+Jacobians in the world frame, restricted to each joint's support). The NumPy twins are
+the passes written in ``collision.py``; the tests compare both paths along a random
+walk.
 """
 
 from __future__ import annotations
@@ -96,31 +98,56 @@ def _broad_phase(
     return count, changed, lowest
 
 
-def _jacobian_rows(n, pA, pB, jA, jB, J, support, out):  # pragma: no cover - compiled
-    """``out[r] <- J_d`` of row ``r`` (see the module doc)."""
+def _narrow_rows(
+    res, near, di, lower, gj, pa, pb, J, support, rows, out, joints, Jd
+):  # pragma: no cover - compiled (the NumPy twin is in collision.py)
+    """After coal: ``res`` its results (pairs x 10: distance, normal, the nearest points
+    on A and B), ``near`` the pairs it computed. ``lower[k]`` <- their distances; the
+    pairs under ``di`` in order into ``rows[:m]``, their results into ``out[:m]``, their
+    joints (A, B) into ``joints[:, :m]``, their ``J_d`` into ``Jd[:m]`` (see the module
+    doc). Returns ``(m, lowest)``, ``lowest`` the smallest distance of ``near``."""
+    m = 0
+    lowest = np.inf
+    for i in range(near.shape[0]):
+        k = near[i]
+        d = res[k, 0]
+        lower[k] = d
+        if d < lowest:
+            lowest = d
+        if d < di:
+            rows[m] = k
+            for c in range(10):
+                out[m, c] = res[k, c]
+            m += 1
     nv = J.shape[1]
     coef = np.empty(6)
-    for r in range(n.shape[0]):
+    for r in range(m):
+        k = rows[r]
+        joints[0, r] = gj[pa[k]]
+        joints[1, r] = gj[pb[k]]
         for v in range(nv):
-            out[r, v] = 0.0
+            Jd[r, v] = 0.0
+        n0, n1, n2 = out[r, 1], out[r, 2], out[r, 3]
         for side in range(2):
-            p = pA[r] if side == 0 else pB[r]
-            j = jA[r] if side == 0 else jB[r]
+            o = 4 + 3 * side
+            p0, p1, p2 = out[r, o], out[r, o + 1], out[r, o + 2]
+            j = joints[side, r]
             sign = -1.0 if side == 0 else 1.0
-            coef[0], coef[1], coef[2] = n[r, 0], n[r, 1], n[r, 2]
-            coef[3] = p[1] * n[r, 2] - p[2] * n[r, 1]
-            coef[4] = p[2] * n[r, 0] - p[0] * n[r, 2]
-            coef[5] = p[0] * n[r, 1] - p[1] * n[r, 0]
+            coef[0], coef[1], coef[2] = n0, n1, n2
+            coef[3] = p1 * n2 - p2 * n1
+            coef[4] = p2 * n0 - p0 * n2
+            coef[5] = p0 * n1 - p1 * n0
             for v in range(nv):
                 if support[j, v]:
                     s = 0.0
                     for i in range(6):
                         s += coef[i] * J[i, v]
-                    out[r, v] += sign * s
+                    Jd[r, v] += sign * s
+    return m, lowest
 
 
 broad_phase = kernel(_broad_phase)
-jacobian_rows = kernel(_jacobian_rows)
+narrow_rows = kernel(_narrow_rows)
 _warm: list[bool] = []
 
 
@@ -154,12 +181,17 @@ def warm_up() -> None:
         )  # fmt: skip
     jac = np.zeros((6, nv), order="F")  # data.J: column-major
     support = ro(np.zeros((nj, nv), dtype=np.bool_))
-    # the witness data: columns of the results' rows (strided), or C-order arrays
-    w = np.zeros((2, 10))[:, 1:4]  # two rows: a strided (not contiguous) view
+    # coal's results: the strided view on their memory (two rows: not contiguous)
+    res = np.lib.stride_tricks.as_strided(
+        np.zeros(40), shape=(2, 10), strides=(160, 8), writeable=False
+    )
     two = ro(np.zeros(2, dtype=np.int64))
-    for m in (ro(w), w, ro(np.zeros((2, 3)))):
-        for J in (ro(jac), jac, ro(np.zeros((6, nv)))):
-            jacobian_rows(m, m, m, two, two, J, support, np.zeros((2, nv)))
-    for k in (broad_phase, jacobian_rows):
+    for J in (ro(jac), jac, ro(np.zeros((6, nv)))):
+        narrow_rows(
+            res, two, 0.05, np.zeros(2), ints, two, two, J, support,
+            np.zeros(2, dtype=np.int64), np.zeros((2, 10)), np.zeros((2, 2), dtype=np.int64),
+            np.zeros((2, nv)),
+        )  # fmt: skip
+    for k in (broad_phase, narrow_rows):
         k.disable_compile()
     _warm.append(True)

@@ -495,6 +495,33 @@ class CollisionPairs:
             self._resChecked = True
             if not _resultsMatch(view, results, near):  # pragma: no cover - another coal
                 self._resView = view = None
+        kernel = _kernels.narrow_rows
+        if kernel is not None and view is not None:
+            k = near.shape[0]
+            rows, res, Jd = np.empty(k, dtype=np.int64), np.empty((k, 10)), np.empty((k, model.nv))
+            joints = np.empty((2, k), dtype=np.int64)
+            try:
+                m, low = kernel(
+                    view, near, float(di), lb, self._gjoint, self._pa, self._pb, data.J,
+                    self._support, rows, res, joints, Jd,
+                )  # fmt: skip
+            except TypeError as exc:  # pragma: no cover - types not compiled for
+                _jit.refused(self.who, exc)
+                _kernels.narrow_rows = kernel = None
+            else:
+                self.minDistance, self.narrow = min(lowest, low), int(k)
+                if not m:
+                    self._empty(self.minDistance)
+                    self.narrow = int(k)
+                    return
+                res = res[:m]
+                self.rowPairs, self.rowD, self.rowJ = rows[:m], res[:, 0], Jd[:m]
+                self.rowNormal, self.rowPointA, self.rowPointB = (
+                    res[:, 1:4], res[:, 4:7], res[:, 7:10]
+                )  # fmt: skip
+                self.rowJointA, self.rowJointB = joints[0, :m], joints[1, :m]
+                return
+        # the same without the compiled kernel (NumPy, or coal's accessors)
         if view is not None:
             res = view[near]
             dist = res[:, 0]
@@ -527,16 +554,7 @@ class CollisionPairs:
                 pB[r] = res.getNearestPoint2()
         gj = self._gjoint
         jA, jB = gj[self._pa[rows]], gj[self._pb[rows]]
-        J = data.J
-        if _kernels.jacobian_rows is not None:
-            try:
-                self.rowJ = np.empty((m, model.nv))
-                _kernels.jacobian_rows(n, pA, pB, jA, jB, J, self._support, self.rowJ)
-            except TypeError as exc:  # pragma: no cover - types not compiled for
-                _jit.refused(self.who, exc)
-                _kernels.jacobian_rows = None
-        if _kernels.jacobian_rows is None:
-            self.rowJ = self._jacobianRows(n, pA, pB, jA, jB, J)
+        self.rowJ = self._jacobianRows(n, pA, pB, jA, jB, data.J)
         self.rowNormal, self.rowPointA, self.rowPointB = n, pA, pB
         self.rowJointA, self.rowJointB = jA, jB
 
@@ -549,8 +567,8 @@ class CollisionPairs:
         jB: np.ndarray,
         J: np.ndarray,
     ) -> np.ndarray:
-        """``J_d`` of the rows (NumPy; :func:`._collisionkernels.jacobian_rows` is its
-        compiled twin)."""
+        """``J_d`` of the rows (NumPy; :func:`._collisionkernels.narrow_rows` computes it
+        compiled)."""
         coef = np.empty((2, n.shape[0], 6))
         for side, p in enumerate((pA, pB)):
             coef[side, :, :3] = n
