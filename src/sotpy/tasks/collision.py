@@ -976,12 +976,16 @@ class TaskCollision(TaskAbstract):
                     None,
                 )
             parts.append(-xi * (d - ds) / (di - ds))
+        if len(parts) == 1:
+            return parts[0]
         return np.concatenate(parts) if parts else np.zeros(0)
 
     @Output(VECTOR, timeDependent=False)
     def upper(self, e: np.ndarray) -> np.ndarray:
         """+inf: a distance may grow as fast as it likes."""
-        return np.full(e.shape[0], np.inf)
+        out = np.empty(e.shape[0])
+        out.fill(math.inf)
+        return out
 
     def _wireOutputs(self) -> None:
         deps: list[Signal] = [self.controlGain]
