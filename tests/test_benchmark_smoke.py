@@ -24,3 +24,23 @@ def test_plan_lazy_and_floor_agree(bench, n):
     assert row["n"] == n
     for key in ("floor", "plan", "lazy", "reread"):
         assert 0 < row[key] < 1e6, (key, row[key])
+
+
+COLLISION_BENCH = BENCH.with_name("bench_collision.py")
+
+
+def test_collision_benchmark_runs_and_both_stacks_reach():
+    spec = importlib.util.spec_from_file_location("bench_collision", COLLISION_BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    result = module.run(ticks=60, repeats=1)
+    assert result["pairs"] > 800
+    assert result["rows_end"][0] > 0 and result["narrow_end"][0] >= result["rows_end"][0]
+    for name in ("without", "with"):
+        s = result[name]
+        assert 0 < s["median"] <= s["p99"] <= s["worst"] < 1e6, (name, s)
+    assert result["ratio"] > 0
+    # the collision level does not change where the wrist goes on this reach
+    ((a, b),) = result["wrist_error"]
+    assert abs(a - b) < 1e-3
+    assert "ratio of medians" in module.table(result)

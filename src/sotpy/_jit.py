@@ -48,6 +48,7 @@ EXPECTED_SECONDS = {
     "sotpy.tasks._rowkernels": 12.0,
     "sotpy.dynamics.device": 3.0,
     "sotpy.solvers.wbc._kernels": 12.0,
+    "sotpy.tasks._collisionkernels": 5.0,
 }
 
 _prepared: set[str] = set()

@@ -10,6 +10,8 @@
     sotpy demo panda-torque [--duration S] [--strategy NAME] [--plot PATH]
     sotpy demo talos-torque [--duration S] [--settle S] [--side left|right]
                             [--contacts floor|welded] [--strategy NAME] [--plot PATH]
+    sotpy demo talos-collision [--scenario torso|obstacle] [--duration S] [--dt S]
+                               [--safety M] [--influence M] [--gain V] [--viewer [--hold S]]
     sotpy demo torque-callbacks [--no-compute]
     sotpy robots
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
@@ -32,6 +34,8 @@ from typing import Any
 
 from .demos import (
     REACH_ROBOTS,
+    collision_options,
+    collision_run,
     finite_float,
     positive_float,
     reach_options,
@@ -124,6 +128,12 @@ DEMOS["talos-torque"] = (
     "shifts its CoM over one foot, reaches with its right hand and shifts back; --plot",
     torque_talos_options,
     torque_talos_run,
+)
+DEMOS["talos-collision"] = (
+    "self-collision and obstacle avoidance: Talos reaches across its body (or past a "
+    "ball) with a collision level in its SOT; distances, chatter checked; --viewer",
+    collision_options,
+    collision_run,
 )
 DEMOS["torque-callbacks"] = (
     "torque control: the activation / deactivation callbacks of tasks and constraints, "

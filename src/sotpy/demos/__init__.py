@@ -15,6 +15,10 @@ command line and a script of ``examples/`` call.
   hard), :func:`~sotpy.demos.reach.run_reach`; ``sotpy demo talos``, ``romeo``,
   ``nao`` (options :func:`reach_options`, runner :func:`reach_run`).
 
+- :mod:`sotpy.demos.collision`: Talos reaching across its body or past an obstacle
+  with a collision level in its ``SOT``; ``sotpy demo talos-collision``
+  (:func:`collision_options`, :func:`collision_run`).
+
 The pendulum tutorial (``sotpy demo pendulum``) lives in :mod:`sotpy.tutorial`.
 
 Each demo function is the story itself: the graph built in plain sight, then run; what
@@ -41,6 +45,8 @@ __all__ = [
     "ROBOT_DEMO_DEFAULTS",
     "TORQUE_STRATEGIES",
     "VIEWER_FRAME",
+    "collision_options",
+    "collision_run",
     "finite_float",
     "non_negative_float",
     "open_viewer",
@@ -589,3 +595,77 @@ def torque_callbacks_run(args: argparse.Namespace) -> int:
         print(f"sotpy demo torque-callbacks: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def collision_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ``sotpy demo talos-collision``: ``--scenario torso|obstacle``,
+    ``--duration S``, ``--dt S``, ``--safety M``, ``--influence M``, ``--gain V``,
+    ``--viewer``, ``--hold S``."""
+    parser.add_argument(
+        "--scenario",
+        choices=("torso", "obstacle"),
+        default="torso",
+        help="torso: the right hand to the left of the chest, across the body (default); "
+        "obstacle: forward, past a ball in the way",
+    )
+    parser.add_argument(
+        "--duration", type=positive_float, default=3.0, metavar="S", help="simulated time, s"
+    )
+    parser.add_argument(
+        "--dt", type=positive_float, default=1e-3, metavar="S", help="time step, s (1e-3)"
+    )
+    parser.add_argument(
+        "--safety",
+        type=non_negative_float,
+        default=0.01,
+        metavar="M",
+        help="safety distance d_s, m (default 0.01)",
+    )
+    parser.add_argument(
+        "--influence",
+        type=positive_float,
+        default=0.05,
+        metavar="M",
+        help="influence distance d_i > d_s, m (default 0.05)",
+    )
+    parser.add_argument(
+        "--gain",
+        type=positive_float,
+        default=0.5,
+        metavar="V",
+        help="the damper's xi: the largest approach speed at d_i, m/s (default 0.5)",
+    )
+    viewer_options(parser)
+
+
+def collision_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo talos-collision``: 0 when every check holds (distance >= d_s at
+    every tick, no chatter, collision level met, feet fixed, limits kept), 1 otherwise
+    or on an error, 130 on Ctrl-C."""
+    from ..errors import SotpyError
+    from .collision import run_talos_collision
+
+    try:
+        result = run_talos_collision(
+            scenario=args.scenario,
+            duration=args.duration,
+            dt=args.dt,
+            safety=args.safety,
+            influence=args.influence,
+            gain=args.gain,
+            viewer=args.viewer,
+            hold=args.hold,
+        )
+    except (SotpyError, ValueError) as exc:
+        print(f"sotpy demo talos-collision: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("sotpy demo talos-collision: interrupted", file=sys.stderr)
+        return 130
+    verdict = "OK" if result["ok"] else "FAILED"
+    failed = [k for k, v in result["checks"].items() if not v]
+    print(
+        f"talos-collision {verdict}{': ' + ', '.join(failed) if failed else ''} "
+        f"({result['ticks']} ticks in {result['wall_time']:.2f} s)"
+    )
+    return 0 if result["ok"] else 1

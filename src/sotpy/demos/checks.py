@@ -8,6 +8,9 @@ story: build the graph, run it, then hand the run to one of these.
   demo's result (the convergence table and the verdicts included).
 - :class:`TourLog`: the robot tour (:mod:`sotpy.demos.robot_tour`): the wrist and the
   CoM every 10 ms, then the feet, the joint limits and the couplings.
+- :class:`CollisionLog`: the collision demo (:mod:`sotpy.demos.collision`): the
+  smallest distance over every pair, the closest pair's rate (its sign changes,
+  :func:`signFlips`, :func:`maxFlipsInWindow`), the feet, the limits.
 - :func:`freePrefix`: a prefix no entity of the pool uses yet, so that a demo never
   clashes with what a user already built.
 
@@ -29,7 +32,15 @@ import pinocchio as pin
 
 from ..graph import pool
 
-__all__ = ["ReachLog", "TourLog", "freePrefix", "jointLimits"]
+__all__ = [
+    "CollisionLog",
+    "ReachLog",
+    "TourLog",
+    "freePrefix",
+    "jointLimits",
+    "maxFlipsInWindow",
+    "signFlips",
+]
 
 #: Times of the rows of the reaching demo's convergence table (s), and its end.
 SUMMARY_TIMES = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)
@@ -529,6 +540,190 @@ class TourLog:
             "coupling_error": coupling_error,
             "couplings_ok": couplings_ok,
             "ok": feet_fixed is not False and clamped == 0 and couplings_ok,
+            "table": "\n".join(lines),
+            "wall_time": wall_time,
+        }
+
+
+# -- the collision demo ------------------------------------------------------------------
+def signFlips(rates: np.ndarray, deadband: float) -> np.ndarray:
+    """The ticks at which a rate changes sign: ``rates[k]`` and the last rate before it
+    whose magnitude exceeded ``deadband`` have opposite signs (rates within the deadband,
+    or NaN, carry no sign). Returns the indices ``k``."""
+    flips = []
+    last = 0.0
+    for k, r in enumerate(rates):
+        if not (abs(r) > deadband):  # NaN or inside the deadband: no sign
+            continue
+        s = 1.0 if r > 0 else -1.0
+        if last and s != last:
+            flips.append(k)
+        last = s
+    return np.array(flips, dtype=int)
+
+
+def maxFlipsInWindow(flips: np.ndarray, window: int) -> int:
+    """The largest number of sign changes (:func:`signFlips`) in any ``window``
+    consecutive ticks."""
+    if flips.shape[0] == 0:
+        return 0
+    ends = np.searchsorted(flips, flips + window, side="left")
+    return int((ends - np.arange(flips.shape[0])).max())
+
+
+class CollisionLog:
+    """The record of the collision demo (:mod:`sotpy.demos.collision`), tick by tick:
+    the smallest distance over every pair (the feature's ``minDistance``, exact under
+    d_i), the closest pair and its rate, the wrist's distance to its target, the soles'
+    drift and the SOT's residuals; then its checks (:meth:`report`).
+
+    ``CollisionLog(robot, sot, feature, target, steps, dt)``; call :meth:`record` after
+    each ``device.increment(dt)``.
+    """
+
+    def __init__(
+        self, robot: Any, sot: Any, feature: Any, target: np.ndarray, steps: int, dt: float
+    ) -> None:
+        self.robot, self.sot, self.feature = robot, sot, feature
+        self.target = np.asarray(target, dtype=float)
+        self.steps, self.dt = steps, dt
+        dyn = robot.dynamic
+        self.t0 = t0 = max(robot.device.state.time, 0)
+        self._wrist = dyn.signal("right-wrist")
+        self.start = self._wrist(t0).translation.copy()
+        self._soles = {}
+        for side, foot in robot.feet.items():
+            name = f"{_prefix(robot)}-{side}-sole"
+            if not dyn.hasSignal(name):
+                dyn.createPosition(name, foot.frame)
+            self._soles[side] = dyn.signal(name)
+        self._sole0 = {side: sig(t0).copy() for side, sig in self._soles.items()}
+        n1 = steps + 1
+        self.q = np.empty((n1, robot.model.nq))
+        self.min_distance = np.empty(n1)
+        self.closest = np.full(n1, -1, dtype=int)  # pair index, -1: none under d_i
+        self.closest_rate = np.full(n1, np.nan)  # m/s, from tick k to k + 1
+        self.rows = np.zeros(n1, dtype=int)
+        self.wrist = np.empty(n1)
+        self.drift = np.zeros(n1)
+        self.residuals: list[np.ndarray] = []
+        self._last: dict[int, float] = {}
+        self.k = -1
+        self._record(0)
+
+    def record(self) -> None:
+        """Record the tick the device has just written, and the SOT's result."""
+        if self.k + 1 > self.steps:
+            raise IndexError(f"CollisionLog: already {self.steps} ticks recorded")
+        self.residuals.append(np.array(self.sot.lastResult.residuals))
+        self._record(self.k + 1)
+
+    def _record(self, k: int) -> None:
+        t = self.t0 + k
+        f = self.feature
+        self.q[k] = self.robot.device.state(t)
+        d = f.error(t)
+        pairs = f.activePairs(t).astype(int)
+        self.min_distance[k] = f.minDistance(t)
+        self.rows[k] = d.shape[0]
+        now = dict(zip(pairs.tolist(), d.tolist(), strict=True))
+        if k > 0 and self.closest[k - 1] >= 0:
+            p = int(self.closest[k - 1])
+            if p in now:  # the closest pair of the previous tick, one tick later
+                self.closest_rate[k - 1] = (now[p] - self._last[p]) / self.dt
+        if d.shape[0]:
+            self.closest[k] = int(pairs[int(np.argmin(d))])
+        self._last = now
+        self.wrist[k] = float(np.linalg.norm(self._wrist(t).translation - self.target))
+        drift = 0.0
+        for side, sig in self._soles.items():
+            M, M0 = sig(t), self._sole0[side]
+            drift = max(drift, float(np.linalg.norm(M.translation - M0.translation)))
+            drift = max(drift, float(np.linalg.norm(pin.log3(M0.rotation.T @ M.rotation))))
+        self.drift[k] = drift
+        self.k = k
+
+    def report(self, wall_time: float = 0.0) -> dict[str, Any]:
+        """Check the run: the result of
+        :func:`~sotpy.demos.collision.run_talos_collision` (its docstring lists the
+        keys), with ``table``, the verdicts to print."""
+        from . import collision as demo
+
+        if self.k != self.steps:
+            raise ValueError(f"CollisionLog: {self.k} of {self.steps} ticks recorded")
+        f, r = self.feature, self.robot
+        ds = float(f.safetyDistance.value)
+        lowest = float(self.min_distance.min())
+        worst = int(self.min_distance.argmin())
+        flips = signFlips(self.closest_rate, demo.CHATTER_DEADBAND)
+        chatter = maxFlipsInWindow(flips, demo.CHATTER_WINDOW)
+        active = int((self.closest >= 0).sum())
+        lim_q, lim_lo, lim_hi, _ = jointLimits(r.model)
+        jm = np.minimum(self.q[:, lim_q] - lim_lo, lim_hi - self.q[:, lim_q])
+        clamped = sum(v["count"] for v in r.device.boundsReport().values())
+        res = np.array(self.residuals)
+        levels = self.sot.list()
+        ic = 1 + levels.index(demo.COLLISION_TASK.format(prefix=_prefix(r)))
+        collision_residual = float(res[:, ic].max()) if res.size else 0.0
+        wrist_final = float(self.wrist[-1])
+        reached = wrist_final <= demo.REACH_TOLERANCE
+        checks = {
+            "distance": lowest >= ds - demo.DISTANCE_TOLERANCE,
+            "chatter": chatter <= demo.CHATTER_FLIPS,
+            "feet": float(self.drift.max()) <= demo.FEET_TOLERANCE,
+            "limits": bool((jm >= -ROUNDING).all()) and clamped == 0,
+            "collision_level": collision_residual <= demo.LEVEL_TOLERANCE,
+        }
+        closest = f.pairName(int(self.closest[worst])) if self.closest[worst] >= 0 else "none"
+        lines = [
+            f"distance: smallest over every pair and tick {lowest:.5f} m at tick {worst} "
+            f"({closest}); safety distance {ds:g} m (tolerance {demo.DISTANCE_TOLERANCE:g} m)"
+            + ("" if checks["distance"] else " VIOLATED"),
+            f"chatter: the closest pair's rate changed sign {len(flips)} times, at most "
+            f"{chatter} in any {demo.CHATTER_WINDOW} ticks (allowed {demo.CHATTER_FLIPS}; "
+            f"deadband {demo.CHATTER_DEADBAND:g} m/s; a pair under d_i at {active} of "
+            f"{self.steps + 1} ticks)" + ("" if checks["chatter"] else " CHATTER"),
+            f"collision level: largest residual {collision_residual:.1e} m/s (tolerance "
+            f"{demo.LEVEL_TOLERANCE:g}); rows per tick {int(self.rows.min())}.."
+            f"{int(self.rows.max())}",
+            f"wrist: {wrist_final:.4f} m from the target"
+            + (
+                " (reached)"
+                if reached
+                else f" (residual of its level at the end: {float(res[-1, ic + 1]):.3g} m/s)"
+                if res.size
+                else ""
+            ),
+            f"feet: largest sole drift {float(self.drift.max()):.1e} (m or rad; tolerance "
+            f"{demo.FEET_TOLERANCE:g})" + ("" if checks["feet"] else " EXCEEDED"),
+            f"limits: {'every joint within its limits' if checks['limits'] else 'LEFT'}; "
+            f"device clamps: {clamped}",
+        ]
+        return {
+            "robot": r.name,
+            "prefix": _prefix(r),
+            "levels": ["joint limits (SOT, hard)", *levels],
+            "ticks": self.steps,
+            "dt": self.dt,
+            "duration": self.steps * self.dt,
+            "start": self.start,
+            "target": self.target,
+            "q": self.q,
+            "min_distance": self.min_distance,
+            "min_distance_overall": lowest,
+            "closest": self.closest,
+            "closest_rate": self.closest_rate,
+            "sign_flips": flips,
+            "max_flips_in_window": chatter,
+            "rows": self.rows,
+            "wrist": self.wrist,
+            "wrist_final": wrist_final,
+            "reached": reached,
+            "residuals": res,
+            "collision_residual": collision_residual,
+            "feet_drift": float(self.drift.max()),
+            "checks": checks,
+            "ok": all(checks.values()),
             "table": "\n".join(lines),
             "wall_time": wall_time,
         }

@@ -467,6 +467,49 @@ class Controller(Entity):
         )
 
     @command
+    def addCollisionAvoidance(
+        self,
+        name: str,
+        geometry: pin.GeometryModel,
+        srdf: str | None = None,
+        horizon: float = 0.05,
+        safety: float = 0.01,
+        influence: float = 0.05,
+        gain: float = 0.5,
+    ) -> None:
+        """The collision pairs of ``geometry`` (the robot's collision model; minus the
+        SRDF's disabled pairs and adjacent links) kept ``safety`` m apart: for each pair
+        under ``influence`` m, ``d_ddot >= (-c (d - d_s) - (1 + c h) d_dot) / h`` with
+        ``c = gain / (influence - safety)`` and ``h = horizon`` (see
+        ``sotpy.solvers.wbc.collision``). ``getCollisionPairs(name)`` gives its
+        :class:`~sotpy.tasks.collision.CollisionPairs` (obstacles, pair edits)."""
+        from .wbc.collision import CollisionConstraint
+
+        self._addConstraint(
+            "addCollisionAvoidance",
+            CollisionConstraint,
+            name,
+            self.core.robot,
+            geometry,
+            srdf,
+            horizon,
+            safety,
+            influence,
+            gain,
+        )
+
+    @command
+    def getCollisionPairs(self, name: str) -> Any:
+        """The pairs of the collision constraint ``name`` (a ``CollisionPairs``)."""
+        c = self.core.constraints.get(name)
+        pairs = getattr(c, "pairs", None)
+        if pairs is None:
+            raise SotpyError(
+                f"{self._who('getCollisionPairs')}: no collision constraint named {name!r}"
+            )
+        return pairs
+
+    @command
     def addContact(
         self,
         frame: str,

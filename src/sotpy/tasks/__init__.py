@@ -7,11 +7,15 @@ tasks), and meta-tasks that build them.
 - tasks (:mod:`sotpy.tasks.task`): features stacked, with ``task = -gain e`` (equality,
   ``J qdot = task``) or bounds ``lower <= J qdot <= upper`` (inequality): the contract a
   solver reads, written in ``docs/tasks.md``;
+- collisions (:mod:`sotpy.tasks.collision`): ``FeatureCollision`` (the distances of
+  the robot's and the obstacles' pairs under an influence distance, and their
+  Jacobians) and ``TaskCollision`` (the velocity damper on them);
 - :class:`GainAdaptive`: ``gain = a exp(-b |e|) + c``;
 - meta-tasks (:mod:`sotpy.tasks.meta_task`): ``MetaTaskKine6d``, ``MetaTaskKineCom``,
   ``MetaTaskKinePosture``.
 """
 
+from .collision import FeatureCollision, TaskCollision
 from .features import (
     FLAGS,
     OPTICAL_FROM_XFORWARD,
@@ -43,6 +47,7 @@ __all__ = [
     "FLAGS",
     "OPTICAL_FROM_XFORWARD",
     "FeatureAbstract",
+    "FeatureCollision",
     "FeatureGeneric",
     "FeatureJointLimits",
     "FeaturePoint6d",
@@ -57,6 +62,7 @@ __all__ = [
     "MetaTaskKinePosture",
     "Task",
     "TaskAbstract",
+    "TaskCollision",
     "TaskInequality",
     "TaskJointLimits",
     "goto6d",

@@ -2,13 +2,15 @@
 
 The decision vector is ``chi = (a, tau, f)`` (:mod:`.model`), the equations of motion
 ``M a + b = S^T tau + J_c^T f`` a hard equality, tasks weighted least-squares rows
-(:mod:`.tasks`), constraints ``lb <= C chi <= ub`` (:mod:`.constraints`), resolved by
+(:mod:`.tasks`), constraints ``lb <= C chi <= ub`` (:mod:`.constraints`; collision
+avoidance: :mod:`.collision`), resolved by
 one weighted QP or by strict levels (:mod:`.solver`); activation ramps and callbacks
 (:mod:`.activation`); servos and the minimum-jerk profile (:mod:`.servos`). The graph
 entities are in :mod:`sotpy.solvers.controller`. See ``docs/torque-control.md``.
 """
 
 from .activation import CALLBACKS, RAMP_FLOOR, Activatable, ramp_weight
+from .collision import CollisionConstraint
 from .constraints import (
     Constraint,
     ContactConstraint,
@@ -51,6 +53,7 @@ __all__ = [
     "BilateralContactSpec",
     "CartesianAccelerationTask",
     "CoMAccelerationTask",
+    "CollisionConstraint",
     "Constraint",
     "ContactConstraint",
     "ContactSpec",
