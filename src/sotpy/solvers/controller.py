@@ -169,6 +169,7 @@ class Controller(Entity):
         h.time_budget = checked_time_budget(
             f"{self.className}({self.name}).setTimeBudget", seconds, h.time_budget
         )
+        self.solution.setReady()  # a tick already solved is solved again with it
 
     @command
     def getTimeBudget(self) -> float | None:
@@ -182,6 +183,7 @@ class Controller(Entity):
         h.max_iter = checked_max_iter(
             f"{self.className}({self.name}).setMaxIterations", n, h.max_iter
         )
+        self.solution.setReady()
 
     @command
     def getMaxIterations(self) -> int:

@@ -639,6 +639,15 @@ class WholeBodyController:
             levels.append((Ey * sw[:, None], fy * sw))
         res = self.last_hierarchy = self.hierarchy.solve(levels)
         if not res.feasible:
+            if res.budget_hit and res.solved == 0:
+                return (
+                    None,
+                    False,
+                    (
+                        f"the solver stopped at its {res.status} budget before it met the"
+                        f" constraints (violation {res.residuals[0]:.3g})"
+                    ),
+                )
             return None, False, f"the constraints cannot be met (violation {res.residuals[0]:.3g})"
         y = np.asarray(res.x, dtype=float)
         chi = np.empty(L.n)

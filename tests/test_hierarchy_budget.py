@@ -1,0 +1,292 @@
+"""The hierarchical solver's budget contract, and its answers on adversarial stacks.
+
+A stopped call (``status`` "iterations" or "time") must return a finite point that is
+optimal on the levels it reports as solved; the next calls continue from its active
+rows and reach the optimum. Without a budget, every stack of the adversarial class
+(rank-deficient rows, conflicting one-sided bounds, rows scaled by 1 to 100) reaches the
+lexicographic optimum of the independent QP cascade, in both twins.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from reference_hierarchy import cascade_hierarchy, level_residuals
+from sotpy.errors import BudgetWarning, CommandError, SotpyWarning
+from sotpy.graph import Entity
+from sotpy.loop import ControlLoop
+from sotpy.solvers import HierarchySolver
+from sotpy.solvers._activeset_jit import solve as compiled
+from sotpy.solvers.sot import SOT
+from sotpy.tasks import FeatureGeneric, Task, TaskInequality
+
+JITS = [False, True] if compiled is not None else [False]
+
+
+def adversarial(seed: int, n: int | None = None, p: int | None = None):
+    """A seeded stack: optional box, then ``p`` levels of rank-deficient rows scaled by 1
+    to 100, mixing equalities, one-sided and two-sided bounds, often two one-sided bounds
+    that conflict along one direction."""
+    rng = np.random.default_rng(seed)
+    n = n or int(rng.integers(6, 25))
+    p = p or int(rng.integers(2, 5))
+    levels = []
+    if rng.random() < 0.5:
+        levels.append((np.eye(n), -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)))
+    for _ in range(p):
+        m = int(rng.integers(2, max(3, n // 2)))
+        r = int(rng.integers(1, m + 1))
+        A = rng.standard_normal((m, r)) @ rng.standard_normal((r, n))
+        A *= 10.0 ** rng.uniform(0, 2, (m, 1))
+        c = A @ rng.standard_normal(n) * 0.5 + rng.standard_normal(m)
+        kind = rng.integers(0, 4, m)
+        lo = np.where(kind <= 1, c, -np.inf)
+        up = np.where((kind == 0) | (kind == 2), c, np.inf)
+        both = kind == 3
+        lo[both] = c[both] - rng.uniform(0, 1, both.sum())
+        up[both] = c[both] + rng.uniform(0, 1, both.sum())
+        if rng.random() < 0.6:
+            A[1] = -A[0] * rng.uniform(0.5, 2.0)
+            lo[0], up[0] = 0.1 * np.linalg.norm(A[0]), np.inf
+            lo[1], up[1] = 0.1 * np.linalg.norm(A[1]), np.inf
+        levels.append((A, lo, up))
+    return levels
+
+
+#: seeds of the comparisons with the QP cascade (its proxsuite QPs stall on the degenerate
+#: sets of seeds 10 and 22, for seconds to minutes; the solver's answers there are
+#: compared between the twins)
+SEEDS = [s for s in range(26) if s not in (10, 22)]
+
+
+def _scale(optimal) -> float:
+    return 1.0 + float(np.max(np.abs(optimal)))
+
+
+@pytest.mark.parametrize("jit", JITS)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_adversarial_stacks_reach_the_cascade_optimum(seed, jit):
+    levels = adversarial(seed)
+    res = HierarchySolver(jit=jit, time_budget=None, max_iter=1000).solve(levels)
+    assert res.converged and res.status == "optimal" and res.solved == len(levels)
+    x_ref, optimal = cascade_hierarchy(levels)
+    got = level_residuals(levels, res.x)
+    np.testing.assert_allclose(got, optimal, atol=1e-6 * _scale(optimal))
+    # the minimum-norm point of the last optimal set: the cascade's
+    assert np.linalg.norm(res.x - x_ref) <= 1e-5 * (1.0 + np.linalg.norm(x_ref))
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_both_twins_take_the_same_decisions(seed):
+    if compiled is None:
+        pytest.skip("numba is not installed")
+    levels = adversarial(seed)
+    a = HierarchySolver(jit=False, time_budget=None, max_iter=1000).solve(levels)
+    b = HierarchySolver(jit=True, time_budget=None, max_iter=1000).solve(levels)
+    assert a.iterations == b.iterations
+    np.testing.assert_allclose(a.x, b.x, atol=1e-8 * (1.0 + np.abs(a.x).max()))
+
+
+def test_rank_one_lower_bounds_give_the_minimum_norm_point():
+    """One level, a rank-1 4 x 4 matrix, lower bounds only (the case where a QP back-end
+    once answered with |x| = 6.6e6): the answer is the cascade's minimum-norm point."""
+    rng = np.random.default_rng(7)
+    u, v = rng.standard_normal(4), rng.standard_normal(4)
+    A = np.outer(u, v)
+    lower = np.abs(u) * 0.3 * np.linalg.norm(v) * np.sign(u)
+    levels = [(A, lower, np.full(4, np.inf))]
+    x_ref, optimal = cascade_hierarchy(levels)
+    for jit in JITS:
+        res = HierarchySolver(jit=jit).solve(levels)
+        assert res.converged
+        np.testing.assert_allclose(level_residuals(levels, res.x), optimal, atol=1e-9)
+        np.testing.assert_allclose(res.x, x_ref, atol=1e-7)
+        # the point lies along v: the only direction the rows see
+        assert np.linalg.norm(res.x - v * (v @ res.x) / (v @ v)) < 1e-9
+
+
+def _hard_stacks(count: int):
+    """Adversarial stacks whose cold solve takes several iterations."""
+    out = []
+    for seed in SEEDS:
+        levels = adversarial(seed)
+        if HierarchySolver(time_budget=None).solve(levels).iterations >= 4:
+            out.append(levels)
+            if len(out) == count:
+                break
+    return out
+
+
+@pytest.mark.parametrize("jit", JITS)
+def test_an_iteration_budget_keeps_the_levels_it_solved(jit):
+    for levels in _hard_stacks(10):
+        _, optimal = cascade_hierarchy(levels)
+        tol = 1e-6 * _scale(optimal)
+        for budget in (1, 2, 3):
+            res = HierarchySolver(jit=jit, time_budget=None, max_iter=budget).solve(levels)
+            if res.converged:
+                continue
+            assert res.status == "iterations" and res.budget_hit
+            assert res.iterations <= budget + 1  # the completing step is one more eHQP
+            assert np.isfinite(res.x).all()
+            assert 0 <= res.solved < len(levels) and res.stopped_level == res.solved
+            # the levels it proved are at their optimum (the levels below may be anywhere)
+            got = level_residuals(levels, res.x)
+            np.testing.assert_allclose(got[: res.solved], optimal[: res.solved], atol=tol)
+
+
+@pytest.mark.parametrize("jit", JITS)
+def test_calls_stopped_by_the_budget_continue_to_the_optimum(jit):
+    """The next call starts from the previous call's active rows: a loop whose every
+    call stops at a small budget still reaches the optimum of a fixed stack."""
+    for levels in _hard_stacks(6):
+        _, optimal = cascade_hierarchy(levels)
+        solver = HierarchySolver(jit=jit, time_budget=None, max_iter=2)
+        for _ in range(200):
+            res = solver.solve(levels)
+            if res.converged:
+                break
+        assert res.converged
+        np.testing.assert_allclose(
+            level_residuals(levels, res.x), optimal, atol=1e-6 * _scale(optimal)
+        )
+
+
+@pytest.mark.parametrize("jit", JITS)
+def test_a_tiny_time_budget_stops_with_status_time(jit):
+    levels = _hard_stacks(1)[0]
+    res = HierarchySolver(jit=jit, time_budget=1e-9).solve(levels)
+    assert res.status == "time" and res.budget_hit and not res.converged
+    assert np.isfinite(res.x).all() and res.solved < len(levels)
+    assert res.iterations >= 1  # a call always makes progress
+
+
+# ---------------------------------------------------------------- SOT and Controller
+N = 8
+
+
+class BudgetTestDevice(Entity):
+    """Pulls the SOT's control at each tick and flips the tracked target's sign, so that
+    the previous tick's active rows are always wrong."""
+
+    def __init__(self, name: str, sot: SOT, feature: FeatureGeneric) -> None:
+        super().__init__(name)
+        self.sot, self.feature, self.t = sot, feature, 0
+
+    def increment(self, dt: float) -> None:
+        self.t += 1
+        self.feature.errorIN.value = (-1.0) ** self.t * np.linspace(1.0, 2.0, N)
+        self.sot.control.recompute(self.t)
+
+
+def _flipping_sot(prefix: str) -> tuple[SOT, FeatureGeneric]:
+    rng = np.random.default_rng(3)
+    box = FeatureGeneric(prefix + "fbox")
+    box.errorIN.value = np.zeros(N)
+    box.jacobianIN.value = np.eye(N)
+    limits = TaskInequality(prefix + "box")
+    limits.add(box)
+    limits.referenceInf.value = np.full(N, -0.1)
+    limits.referenceSup.value = np.full(N, 0.1)
+    limits.dt.value = 1.0
+    reach = FeatureGeneric(prefix + "freach")
+    reach.errorIN.value = np.linspace(1.0, 2.0, N)
+    reach.jacobianIN.value = rng.standard_normal((N, N))
+    task = Task(prefix + "reach")
+    task.add(reach)
+    task.controlGain.value = 1.0
+    sot = SOT(prefix + "sot")
+    sot.setSize(N)
+    sot.push(limits)
+    sot.push(task)
+    return sot, reach
+
+
+def test_sot_budget_hits_warn_once_and_are_counted_by_the_loop():
+    sot, reach = _flipping_sot("budget_")
+    sot.setMaxIterations(1)
+    dev = BudgetTestDevice("budget_dev", sot, reach)
+    loop = ControlLoop("budget_loop", dev, 0.001)
+    with pytest.warns(BudgetWarning, match=r"SOT\(budget_sot\): the solver stopped at its"):
+        loop.run(1, realtime=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BudgetWarning)  # said once while it keeps hitting
+        loop.run(9, realtime=False)
+    assert sot.budgetHits == 10
+    assert loop.stats().budget_hits == 9  # the statistics of the last run
+    # every answer stays inside the box (the hard level), budget or not
+    x = sot.control.value
+    assert np.all(np.abs(x) <= 0.1 + 1e-9)
+    # with room to converge: no more hits, and the next hit warns again
+    sot.setMaxIterations(200)
+    loop.run(3, realtime=False)
+    assert sot.budgetHits == 10
+    sot.setMaxIterations(1)
+    with pytest.warns(BudgetWarning):
+        loop.run(1, realtime=False)
+
+
+def test_sot_refuses_bad_budgets_and_keeps_its_settings():
+    sot, _ = _flipping_sot("badbudget_")
+    sot.setTimeBudget(2e-3)
+    sot.setMaxIterations(50)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), "fast"):
+        with pytest.raises(CommandError, match=r"SOT\(badbudget_sot\)\.setTimeBudget"):
+            sot.setTimeBudget(bad)
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(CommandError, match=r"SOT\(badbudget_sot\)\.setMaxIterations"):
+            sot.setMaxIterations(bad)
+    assert sot.getTimeBudget() == 2e-3 and sot.getMaxIterations() == 50
+    sot.setTimeBudget(None)
+    assert sot.getTimeBudget() is None
+
+
+def test_controller_budget_hits_warn_once_and_a_stop_before_the_constraints_falls_back():
+    from sotpy.dynamics import load_robot
+    from sotpy.graph import plug
+    from sotpy.solvers.controller import Controller
+
+    robot = load_robot("panda", prefix="budget_")
+    ctrl = Controller("budget_ctrl", robot.dynamic)
+    ctrl.addCartesianTask("ee", "panda_hand_tcp", 1.0, 1)
+    ctrl.addJointTask("posture", 1.0, 2)
+    lim = np.minimum(robot.model.effortLimit[-9:], 30.0)  # within the device's own
+    ctrl.addTorqueLimits("tau", -lim, lim)
+    ctrl.setResolutionStrategy("MultiLevelWeighted")
+    ctrl.activateTasksAndConstraints()
+    ctrl.ee.value = np.array([20.0, -20.0, 20.0, 0, 0, 0])  # far: the limits bind
+    ctrl.setMaxIterations(1)
+    robot.device.setControlType("torque")
+    plug(ctrl.torque, robot.device.control)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot.device.increment(0.001)
+    said = [str(w.message) for w in caught if issubclass(w.category, SotpyWarning)]
+    # one iteration does not reach the torque limits from a cold start: the controller
+    # says why and sends its fallback (gravity compensation, within the limits)
+    assert any("stopped at its iterations budget before it met the constraints" in m for m in said)
+    assert sum(issubclass(w.category, BudgetWarning) for w in caught) == 1
+    assert ctrl.budgetHits == 1 and not ctrl.solutionFound.value
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BudgetWarning)  # said once while it keeps hitting
+        robot.device.increment(0.001)
+        robot.device.increment(0.001)
+    assert ctrl.budgetHits == 3
+    assert np.all(np.abs(ctrl.torque.value) <= lim + 1e-6)
+    # room to converge: the limits hold, found, no more hits
+    hits = ctrl.budgetHits  # (reading torque.value above may have solved once more)
+    ctrl.setMaxIterations(200)
+    ctrl.setTimeBudget(None)  # a loaded test machine must not decide this one
+    with warnings.catch_warnings():  # the far target drives the fingers to their speed
+        warnings.filterwarnings("ignore", r"Device\(budget__device\): velocity bounds")
+        robot.device.increment(0.001)
+    assert ctrl.solutionFound.value and ctrl.budgetHits == hits
+    tau = ctrl.torque.value
+    assert np.all(np.abs(tau) <= lim + 1e-6)
+    assert np.any(np.abs(tau) >= lim - 1e-6)  # they bind
+    with pytest.raises(CommandError, match=r"Controller\(budget_ctrl\)\.setMaxIterations"):
+        ctrl.setMaxIterations(0)
+    assert ctrl.getMaxIterations() == 200
