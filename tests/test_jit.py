@@ -37,3 +37,48 @@ def test_first_compile_is_reported_on_stderr(capsys):
     assert "compiled the kernels in 12 s" in capsys.readouterr().err
     _jit.report_compile("the kernels", 0.5)  # a cache load: nothing said
     assert capsys.readouterr().err == ""
+
+
+TINY = """
+import numpy as np
+from sotpy._jit import kernel
+
+
+@kernel
+def twice(a):
+    return 2.0 * a[0]
+
+
+def warm_up():
+    twice(np.ones(1))
+    twice.disable_compile()
+"""
+
+
+def test_prepare_announces_a_compile_before_it_and_is_silent_once_cached(tmp_path):
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return
+    (tmp_path / "sotpy_tiny_kernels.py").write_text(TINY)
+    code = (
+        f"import sys; sys.path.insert(0, {str(tmp_path)!r});"
+        "from sotpy import _jit; _jit.prepare('the tiny kernel', ['sotpy_tiny_kernels']);"
+        "import sotpy_tiny_kernels as m, numpy as np; print(m.twice(np.full(1, 4.0)))"
+    )
+    env = dict(os.environ)
+    env.pop("SOTPY_JIT", None)
+    env.pop("NUMBA_CACHE_DIR", None)
+    runs = [
+        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+        for _ in range(2)
+    ]
+    for out in runs:
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == "8.0"
+    first = runs[0].stderr.splitlines()
+    # said first, with what and why; then the module's progress line
+    assert first[0].startswith("sotpy: compiling the tiny kernel (first use on this machine")
+    assert "[1/1] sotpy_tiny_kernels: done" in first[-1]
+    assert list(tmp_path.glob("__pycache__/sotpy_tiny_kernels.twice-*.nbi"))
+    assert runs[1].stderr == ""  # loaded from the cache: nothing said

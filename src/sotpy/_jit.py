@@ -121,7 +121,10 @@ def _compile_children(what: str, names: list[str]) -> None:
         file=sys.stderr,
         flush=True,
     )
-    env = dict(os.environ, NUMBA_OPT="1")
+    # the children import the modules as this process does (its sys.path: a source tree,
+    # a path added at run time)
+    path = os.pathsep.join(p for p in sys.path if p)
+    env = dict(os.environ, NUMBA_OPT="1", PYTHONPATH=path)
     start = time.perf_counter()
     running: list[tuple[str, subprocess.Popen[bytes]]] = []
     pending = list(names)
