@@ -39,21 +39,28 @@ Jacobian: ``v_j``, ``w_j`` in world axes), so
     J_d = n^T (J_{p_B} - J_{p_A}), \quad
     n^T J_p = n^T J^{lin}_j + ((p - o_j) \times n)^T J^{ang}_j
 
-(1 x nv, m/s per unit of v). This is the exact derivative of the distance between two
-convex shapes whose witness points are unique (the rate of the normal and the motion of
-the witness points on the surfaces contribute nothing at first order); it is checked
-against central finite differences along random velocities (``tests/test_collision.py``).
+(1 x nv, m/s per unit of v). The tick computes the same from the joints' Jacobians in
+the world frame (``data.J``, restricted to each joint's support, whose velocity is that
+of the point at the world origin): ``n^T J_p = n^T J^{lin,W}_j + (p \times n)^T
+J^{ang,W}_j``, with no Jacobian call per joint. This is the exact derivative of the
+distance between two convex shapes whose witness points are unique (the rate of the
+normal and the motion of the witness points on the surfaces contribute nothing at first
+order); it is checked against central finite differences along random velocities
+(``tests/test_collision.py``).
 A shape fixed to the world (an obstacle on no frame) has ``J_p = 0``.
 
 **Broad phase.** Each geometry has a bounding sphere (centre ``c_g`` in its joint's
-frame, radius ``r_g``, from coal's local AABB). Each tick, one vectorised NumPy pass
-puts the centres in the world (``R_j c_g + o_j``) and bounds every pair's distance from
-below by ``|c_A - c_B| - r_A - r_B``. A second bound is the pair's last exact distance
-minus how far any point of either shape can have moved since (``|c' - c| + r_g |R' -
-R|_F`` per tick for a geometry, ``R`` its joint's rotation). Only the pairs whose larger
-bound is under the influence distance ``d_i`` reach the narrow phase (coal) and, if their
-distance is under ``d_i``, the task: pairs far apart cost one row of those array passes,
-and no pair under ``d_i`` is ever skipped.
+frame, radius ``r_g``, from coal's local AABB). Each tick, one pass (a compiled kernel,
+or its NumPy twin without numba) puts the centres in the world (``R_j c_g + o_j``) and
+bounds every pair's distance from below by ``|c_A - c_B| - r_A - r_B``. A second bound
+is the pair's last exact distance minus how far any point of either shape can have moved
+since (``|c' - c| + r_g |R' - R|_F`` per tick for a geometry, ``R`` its joint's
+rotation). Only the pairs whose larger bound is under the influence distance ``d_i``
+reach the narrow phase (coal) and, if their distance is under ``d_i``, the task: pairs
+far apart cost one iteration of that pass, and no pair under ``d_i`` is ever skipped.
+The joint placements and coal's results are read through read-only arrays on Pinocchio's
+and coal's memory (their layout checked against the accessors first; the accessors
+otherwise).
 
 **The velocity damper** (Faverjon and Tournassoud, *A local based approach for path
 planning of manipulators with a high number of degrees of freedom*, ICRA 1987; Kanoun,
