@@ -56,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _jit
 from .._jit import refused
 from ..errors import (
     BudgetWarning,
@@ -107,6 +108,11 @@ class SOT(Entity):
         # SoT's SOT has no joint-limit level: without a Dynamic there are no limits to
         # read, so there is none either
         self._jointLimits = model is not None
+        # the solver's and the task rows' kernels, compiled together on a first run
+        _jit.prepare(
+            "the hierarchical solver and the task rows",
+            ["sotpy.solvers._activeset_jit", "sotpy.tasks._rowkernels"],
+        )
         self._solver = HierarchySolver()
         self.lastResult: Any = None
         self._warned = False
@@ -688,7 +694,7 @@ class SOT(Entity):
                 "kernels (numba missing or SOTPY_JIT=0)"
             )
         if enabled:
-            _rowkernels.warm_up()
+            _jit.prepare("the task rows", ["sotpy.tasks._rowkernels"])
         self._fuse = bool(enabled)
         self.control.setPlanFusion(self._fusion if self._fuse else None)
 
