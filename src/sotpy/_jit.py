@@ -154,7 +154,10 @@ def _compile_children(what: str, names: list[str]) -> None:
                 continue
             running.remove((name, proc))
             done += 1
-            err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+            err = ""
+            if proc.stderr:
+                err = proc.stderr.read().decode(errors="replace")
+                proc.stderr.close()
             state = "done" if proc.returncode == 0 else f"failed ({err.strip()[-200:]})"
             print(
                 f"{chr(13) if tty else ''}sotpy:   [{done}/{len(names)}] {name}: {state},"

@@ -216,7 +216,6 @@ def run_talos_collision(
     posture.gain.setConstant(1.0)
     sot = SOT(f"{prefix}_sot", r.dynamic)
     sot.dt.value = dt
-    sot.setTimeBudget(None)  # an offline run: every tick solved to the end
     for task in (contact, collision, wrist.task, posture.task):
         sot.push(task)
     for task in (wrist.task, posture.task):
