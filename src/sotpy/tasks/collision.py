@@ -108,6 +108,7 @@ __all__ = [
     "DEFAULT_GAIN",
     "DEFAULT_INFLUENCE",
     "DEFAULT_SAFETY",
+    "CollisionPairs",
     "FeatureCollision",
     "TaskCollision",
     "checkDamper",
