@@ -43,6 +43,49 @@ _EMPTY = np.zeros(0)
 _MISSING = object()
 
 
+def _featureWriters(features: list[Any]) -> tuple[list[tuple[Any, int]], list[Any]] | None:
+    """The row writers of ``features`` as ``(write, number of sources)`` pairs and their
+    sources in order; None if one of them has no writer."""
+    parts: list[tuple[Any, int]] = []
+    sources: list[Any] = []
+    for f in features:
+        w = f._rowWriter()
+        if w is None:
+            return None
+        parts.append((w.write, len(w)))
+        sources += w.sources
+    return parts, sources
+
+
+def _writeFeatureRows(
+    parts: list[tuple[Any, int]], v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float
+) -> int:
+    """The features' rows written from row ``r`` (their values from ``v[o:]``); the row
+    after the last, or -1 when a feature declined."""
+    for fn, n in parts:
+        k = fn(v, o, A, b, r, gain)
+        if k < 0:
+            return -1
+        r += k
+        o += n
+    return r
+
+
+def _selectColumns(selec: Flags, A: np.ndarray, r0: int, r: int) -> bool:
+    """Zero the columns of ``A[r0:r]`` that ``selec`` leaves out (the ``jacobian``
+    callback's ``controlSelec``); False when the selection does not fit ``A``."""
+    n = A.shape[1]
+    cols = selec._cache.get(n, _MISSING)
+    if cols is _MISSING:
+        try:
+            cols = selec.rows(n)
+        except ValueError:
+            return False
+    if cols is not None:
+        A[r0:r] *= selec.mask(n)
+    return True
+
+
 class TaskAbstract(Entity):
     """Features stacked into one error and one Jacobian; the common part of
     :class:`Task` and :class:`TaskInequality` (see the module doc for the contract).
@@ -327,37 +370,21 @@ class Task(TaskAbstract):
             or not computedByOwnCallback(self.task, Task.task.fn)
         ):
             return None
-        parts: list[tuple[Any, int]] = []
-        sources: list[Any] = [self.controlSelec, self.controlGain]
-        for f in self._features:
-            w = f._rowWriter()
-            if w is None:
-                return None
-            parts.append((w.write, len(w)))
-            sources += w.sources
+        found = _featureWriters(self._features)
+        if found is None:
+            return None
+        parts, sources = found
+        sources = [self.controlSelec, self.controlGain, *sources]
         isfinite = math.isfinite
 
         def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
             selec, gain = v[o], v[o + 1]
             if type(gain) is not float or not (gain >= 0.0 and isfinite(gain)):
                 return -1  # the task callback says what is wrong
-            o += 2
             r0 = r
-            for fn, n in parts:
-                k = fn(v, o, A, b, r, gain)
-                if k < 0:
-                    return -1
-                r += k
-                o += n
-            n = A.shape[1]
-            cols = selec._cache.get(n, _MISSING)
-            if cols is _MISSING:
-                try:
-                    cols = selec.rows(n)
-                except ValueError:
-                    return -1
-            if cols is not None:
-                A[r0:r] *= selec.mask(n)
+            r = _writeFeatureRows(parts, v, o + 2, A, b, r, gain)
+            if r < 0 or not _selectColumns(selec, A, r0, r):
+                return -1
             t = b[r0:r]
             if not isfinite(t.dot(t)) and not np.isfinite(t).all():
                 return -1  # a target that overflowed: the task callback names it
@@ -434,16 +461,14 @@ class TaskInequality(TaskAbstract):
             or not computedByOwnCallback(self.upper, TaskInequality.upper.fn)
         ):
             return None
-        parts: list[tuple[Any, int]] = []
-        sources: list[Any] = [
+        found = _featureWriters(self._features)
+        if found is None:
+            return None
+        parts, sources = found
+        sources = [
             self.controlSelec, self.referenceInf, self.referenceSup, self.controlGain, self.dt,
+            *sources,
         ]  # fmt: skip
-        for f in self._features:
-            w = f._rowWriter()
-            if w is None:
-                return None
-            parts.append((w.write, len(w)))
-            sources += w.sources
         isfinite = math.isfinite
         inf_, ninf = math.inf, -math.inf
 
@@ -456,14 +481,10 @@ class TaskInequality(TaskAbstract):
             c = k / dt
             if not isfinite(c):
                 return -1
-            o += 5
             r0 = r
-            for fn, n in parts:  # J and -c e (the features' rows with the gain c)
-                kk = fn(v, o, A, lo, r, c)
-                if kk < 0:
-                    return -1
-                r += kk
-                o += n
+            r = _writeFeatureRows(parts, v, o + 5, A, lo, r, c)  # J and -c e
+            if r < 0:
+                return -1
             m = r - r0
             b = lo[r0:r]
             for ref in (rinf, rsup):
@@ -490,15 +511,8 @@ class TaskInequality(TaskAbstract):
             for ref, out in ((rinf, b), (rsup, u)):
                 if ref.shape[0] and not np.array_equal(np.isfinite(ref), np.isfinite(out)):
                     return -1
-            n = A.shape[1]
-            cols = selec._cache.get(n, _MISSING)
-            if cols is _MISSING:
-                try:
-                    cols = selec.rows(n)
-                except ValueError:
-                    return -1
-            if cols is not None:
-                A[r0:r] *= selec.mask(n)
+            if not _selectColumns(selec, A, r0, r):
+                return -1
             return m
 
         return RowWriter(sources, write)
