@@ -1,7 +1,7 @@
 """The worst cases of the hierarchical solver: a 1 kHz controller is judged by its
 slowest tick.
 
-**Kinematic stacks** (:func:`adversarial_stack`, seeded): ``n`` from 8 to 40 variables,
+**Kinematic stacks** (``sotpy._bench.adversarial_stack``, seeded): ``n`` from 8 to 40 variables,
 2 to 5 levels, often a box first; each level of rank-deficient rows (``U V^T``, rank below
 the row count) scaled by 1 to 100, its rows equalities, one-sided bounds (lower or upper)
 or two-sided; in most levels a pair of one-sided bounds that conflict along the same
@@ -40,38 +40,11 @@ from typing import Any
 
 import numpy as np
 
-from sotpy._bench import machine_line
+from sotpy._bench import adversarial_stack, machine_line
 from sotpy.solvers import HierarchySolver
 
 #: ticks of a drifting stack
 TICKS = 40
-
-
-def adversarial_stack(rng: np.random.Generator, n: int | None = None, p: int | None = None):
-    """A random stack of the class above: a list of levels ``(A, lower, upper)``."""
-    n = n or int(rng.integers(8, 41))
-    p = p or int(rng.integers(2, 6))
-    levels = []
-    if rng.random() < 0.5:
-        levels.append((np.eye(n), -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)))
-    for _ in range(p):
-        m = int(rng.integers(2, max(3, n // 2)))
-        r = int(rng.integers(1, m + 1))
-        A = rng.standard_normal((m, r)) @ rng.standard_normal((r, n))
-        A *= 10.0 ** rng.uniform(0, 2, (m, 1))
-        c = A @ rng.standard_normal(n) * 0.5 + rng.standard_normal(m)
-        kind = rng.integers(0, 4, m)
-        lo = np.where(kind <= 1, c, -np.inf)
-        up = np.where((kind == 0) | (kind == 2), c, np.inf)
-        both = kind == 3
-        lo[both] = c[both] - rng.uniform(0, 1, both.sum())
-        up[both] = c[both] + rng.uniform(0, 1, both.sum())
-        if m >= 2 and rng.random() < 0.6:  # two one-sided bounds that conflict
-            A[1] = -A[0] * rng.uniform(0.5, 2.0)
-            lo[0], up[0] = 0.1 * np.linalg.norm(A[0]), np.inf
-            lo[1], up[1] = 0.1 * np.linalg.norm(A[1]), np.inf
-        levels.append((A, lo.astype(float), up.astype(float)))
-    return levels
 
 
 def drifted(levels, rng: np.random.Generator, t: int):

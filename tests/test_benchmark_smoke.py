@@ -1,4 +1,5 @@
-"""The graph benchmark stays runnable and its three evaluation paths agree."""
+"""The benchmarks stay runnable, and what they check holds (evaluation paths agree,
+answers are right)."""
 
 import importlib.util
 from pathlib import Path
@@ -44,3 +45,20 @@ def test_collision_benchmark_runs_and_both_stacks_reach():
     ((a, b),) = result["wrist_error"]
     assert abs(a - b) < 1e-3
     assert "ratio of medians" in module.table(result)
+
+
+WORST_CASE_BENCH = BENCH.with_name("bench_worst_case.py")
+
+
+def test_worst_case_benchmark_answers_are_the_unbudgeted_optimum():
+    """kinematic() raises if a stack has no optimum without a budget, and records how far
+    each answer that did not hit the budget is from that optimum."""
+    spec = importlib.util.spec_from_file_location("bench_worst_case", WORST_CASE_BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = module.kinematic(n_stacks=4, ticks=3)
+    assert out["cold"]["n"] == 4 and out["drifting"]["n"] == 12
+    for mode, s in out.items():
+        assert s["gap"] <= 1e-8, (mode, s)
+        assert 0 < s["median"] <= s["p99"] <= s["worst"] < 1e7, (mode, s)
+        assert s["its_max"] >= 1

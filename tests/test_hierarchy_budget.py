@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from reference_hierarchy import cascade_hierarchy, level_residuals
+from sotpy._bench import adversarial_stack
 from sotpy.errors import BudgetWarning, CommandError, SotpyWarning
 from sotpy.graph import Entity
 from sotpy.loop import ControlLoop
@@ -26,34 +27,10 @@ from sotpy.tasks import FeatureGeneric, Task, TaskInequality
 JITS = [False, True] if compiled is not None else [False]
 
 
-def adversarial(seed: int, n: int | None = None, p: int | None = None):
-    """A seeded stack: optional box, then ``p`` levels of rank-deficient rows scaled by 1
-    to 100, mixing equalities, one-sided and two-sided bounds, often two one-sided bounds
-    that conflict along one direction."""
-    rng = np.random.default_rng(seed)
-    n = n or int(rng.integers(6, 25))
-    p = p or int(rng.integers(2, 5))
-    levels = []
-    if rng.random() < 0.5:
-        levels.append((np.eye(n), -rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)))
-    for _ in range(p):
-        m = int(rng.integers(2, max(3, n // 2)))
-        r = int(rng.integers(1, m + 1))
-        A = rng.standard_normal((m, r)) @ rng.standard_normal((r, n))
-        A *= 10.0 ** rng.uniform(0, 2, (m, 1))
-        c = A @ rng.standard_normal(n) * 0.5 + rng.standard_normal(m)
-        kind = rng.integers(0, 4, m)
-        lo = np.where(kind <= 1, c, -np.inf)
-        up = np.where((kind == 0) | (kind == 2), c, np.inf)
-        both = kind == 3
-        lo[both] = c[both] - rng.uniform(0, 1, both.sum())
-        up[both] = c[both] + rng.uniform(0, 1, both.sum())
-        if rng.random() < 0.6:
-            A[1] = -A[0] * rng.uniform(0.5, 2.0)
-            lo[0], up[0] = 0.1 * np.linalg.norm(A[0]), np.inf
-            lo[1], up[1] = 0.1 * np.linalg.norm(A[1]), np.inf
-        levels.append((A, lo, up))
-    return levels
+def adversarial(seed: int):
+    """A seeded stack of the solver's hard class (``sotpy._bench.adversarial_stack``), at
+    sizes the reference cascade solves quickly: n 6 to 24, 2 to 4 levels."""
+    return adversarial_stack(np.random.default_rng(seed), n_range=(6, 25), p_range=(2, 5))
 
 
 #: seeds of the comparisons with the QP cascade (its proxsuite QPs stall on the degenerate
