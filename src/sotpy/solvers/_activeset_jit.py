@@ -80,6 +80,18 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         return s
 
     @kernel(fast=True)
+    def _reflect(V, s, t, y, w):  # pragma: no cover - compiled
+        """``y[s:w]`` times the Householder reflector ``I - t v v^T``, ``v = (1, V[s, s+1:w])``
+        (stored after the diagonal of row ``s``)."""
+        d = y[s]
+        for j in range(s + 1, w):
+            d += V[s, j] * y[j]
+        d *= t
+        y[s] -= d
+        for j in range(s + 1, w):
+            y[j] -= d * V[s, j]
+
+    @kernel(fast=True)
     def _pivoted_qr(M, mk, f, tau, piv):  # pragma: no cover - compiled
         """Householder QR with column pivoting of ``M^T`` (``f x mk``) on the rows of
         ``M``: row ``s`` ends holding ``R[:s+1, s]`` then reflector ``s`` (unit entry
@@ -188,13 +200,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 G[s, j] *= sc
             G[s, s] = beta
             for q in range(s + 1, r):
-                d = G[q, s]
-                for j in range(s + 1, w):
-                    d += G[s, j] * G[q, j]
-                d *= t
-                G[q, s] -= d
-                for j in range(s + 1, w):
-                    G[q, j] -= d * G[s, j]
+                _reflect(G, s, t, G[q], w)
 
     @kernel(fast=True)
     def _ls_apply(G, gt, mk, r, rhs, u, y):  # pragma: no cover - compiled
@@ -206,16 +212,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         for j in range(mk, w):
             y[j] = 0.0
         for s in range(r):
-            t = gt[s]
-            if t == 0.0:
-                continue
-            d = y[s]
-            for j in range(s + 1, w):
-                d += G[s, j] * y[j]
-            d *= t
-            y[s] -= d
-            for j in range(s + 1, w):
-                y[j] -= d * G[s, j]
+            if gt[s] != 0.0:
+                _reflect(G, s, gt[s], y, w)
         for s in range(r - 1, -1, -1):
             v = y[s]
             for q in range(s + 1, r):
@@ -320,16 +318,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     for i in range(f):
                         y[i] = u[i] if i < r else 0.0
                     for s in range(r - 1, -1, -1):
-                        ts = tau[k, s]
-                        if ts == 0.0:
-                            continue
-                        d = y[s]
-                        for i in range(s + 1, f):
-                            d += M[s, i] * y[i]
-                        d *= ts
-                        y[s] -= d
-                        for i in range(s + 1, f):
-                            y[i] -= d * M[s, i]
+                        if tau[k, s] != 0.0:
+                            _reflect(M, s, tau[k, s], y, f)
                     for i in range(f):
                         yi = y[i]
                         for col in range(n):
