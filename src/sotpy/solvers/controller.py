@@ -917,7 +917,7 @@ class MinJerk(Entity):
         return self._at(t, dt)[2]
 
 
-class WrenchServo(Entity):
+class WrenchServo(_Pid, Entity):
     r"""PI on a wrench, for a wrench task: with the error ``e = w_d - w`` (the desired
     minus the measured wrench, N and N m),
 
@@ -944,19 +944,7 @@ class WrenchServo(Entity):
     dt = Input(DOUBLE, default=0.001, doc="tick period (s)")
 
     def __init__(self, name: str) -> None:
-        self._integral: np.ndarray | None = None
-        self._tLast: int | None = None
-
-    def _vec(self, what: str, x: np.ndarray, n: int, allow_inf: bool = False) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        x = np.full(n, x[0]) if x.shape == (1,) else x
-        ok = np.all(~np.isnan(x)) and (allow_inf or np.all(np.isfinite(x)))
-        if x.shape != (n,) or not ok or np.any(x < 0):
-            raise SotpyError(
-                f"{self.className}({self.name})::{what}: expected 1 or {n} values >= 0"
-                f"{'' if allow_inf else ', finite'}, got {x}"
-            )
-        return x
+        self._pidInit()
 
     @Output(
         VECTOR,
@@ -975,9 +963,9 @@ class WrenchServo(Entity):
             )
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(wd))):
             raise SotpyError(f"{self.className}({self.name}): measured/reference not finite")
-        kp = self._vec("Kp", Kp, n)
-        ki = self._vec("Ki", Ki, n)
-        lim = self._vec("integralLimit", limit, n, allow_inf=True)
+        kp = self._gain("Kp", Kp, n)
+        ki = self._gain("Ki", Ki, n)
+        lim = self._gain("integralLimit", limit, n, allow_inf=True)
         if not (math.isfinite(dt) and dt > 0):
             raise SotpyError(f"{self.className}({self.name})::dt: expected > 0 s, got {dt}")
         if self._integral is None or self._integral.shape != (n,):
