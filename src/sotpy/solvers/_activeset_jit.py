@@ -475,6 +475,23 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         return nact
 
     @kernel(fast=True)
+    def _violation(A, lo, up, anorm, eps, r0, r1, x, n):  # pragma: no cover - compiled
+        """``||v(x)||^2`` over rows ``r0..r1-1``: their squared distance to their intervals
+        beyond the feasibility tolerance (see :func:`._activeset._violation`)."""
+        xi = 1.0
+        for col in range(n):
+            xi = max(xi, abs(x[col]))
+        v2 = 0.0
+        for i in range(r0, r1):
+            v = _dot(A[i], x, n)
+            tol = eps * (1.0 + anorm[i] * xi)
+            if v < lo[i] - tol:
+                v2 += (lo[i] - tol - v) ** 2
+            elif v > up[i] + tol:
+                v2 += (v - up[i] - tol) ** 2
+        return v2
+
+    @kernel(fast=True)
     def _ratio(
         A, x, d, kind, status, attach, level_of, lo, up, anorm, jmax, upto, tol
     ):  # pragma: no cover
@@ -599,7 +616,11 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         for q in range(info.shape[0]):
             info[q] = 0
         x = np.zeros(n)
+        xprev = np.empty(n)  # the previous call's answer (NaN: none)
+        warm = True
         for col in range(n):
+            xprev[col] = x_out[col]
+            warm = warm and math.isfinite(xprev[col])
             x_out[col] = 0.0
         for k in range(p):
             res[k] = 0.0
@@ -724,6 +745,18 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         # x is the recursion's point of the current active rows, nothing changed since:
         # every phase's target is x itself (the usual tick: the guess was right)
         at_ehqp = True
+        v0 = (
+            _violation(A, lo, up, anorm, eps, starts[0], starts[1], x, n) if warm and p > 0 else 0.0
+        )
+        if v0 > 0.0:
+            # ... unless it violates level 0 more than the previous answer corrected onto
+            # level 0's active rows: then the first phase starts there
+            _correct(A, t, act, lstart, 0, 0.0, xprev, ws, tmp, rhs)
+            _correct(A, t, act, lstart, 1, 0.0, tmp, ws, xj, rhs)
+            if _violation(A, lo, up, anorm, eps, starts[0], starts[1], xj, n) < v0:
+                for col in range(n):
+                    x[col] = xj[col]
+                at_ehqp = False
         dirty = ns  # the first sub-level whose rows changed since the last eHQP
         for j in range(p + 1):
             upto = 2 * j + 2 if j < p else ns

@@ -83,8 +83,9 @@ _STATUS = ("optimal", "iterations", "time")
 #: iteration and gets ten times the budget
 DEFAULT_TIME_BUDGET = 5e-4
 DEFAULT_TIME_BUDGET_NUMPY = 5e-3
-#: the budget of a call without a warm start (the first one, or after the level sizes
-#: changed), as a multiple of the time budget: it finds the active rows from nothing
+#: the budget of a solver's first call (no previous answer, no active rows), as a multiple
+#: of the time budget: it finds the active rows from nothing. A call after the level sizes
+#: changed starts from the last answer and has the plain budget
 COLD_FACTOR = 20.0
 DEFAULT_MAX_ITER = 200
 _DEFAULT = object()
@@ -238,7 +239,7 @@ class _Buffers:
         self.up = np.zeros(m)
         self.status = np.zeros(m, dtype=np.int8)
         self.attach = np.zeros(m, dtype=np.int64)
-        self.x = np.zeros(n)
+        self.x = np.full(n, np.nan)  # the last answer, the kernel's start (NaN: none yet)
         self.res = np.zeros(len(sizes))
         self.ranks = np.zeros(len(sizes), dtype=np.int64)
         self.fro = np.zeros(len(sizes))
@@ -262,9 +263,11 @@ class HierarchySolver:
         time_budget: time budget of a call, in seconds of the calling thread's CPU time
             (> 0, finite, or ``None`` for none); exceeded by at most one iteration.
             Default: ``DEFAULT_TIME_BUDGET`` (0.5 ms) compiled,
-            ``DEFAULT_TIME_BUDGET_NUMPY`` (5 ms) for the NumPy twin. A call without a warm
-            start (the first one, or the first after the level sizes changed) gets
-            ``COLD_FACTOR`` (20) times the budget: it has to find the active rows.
+            ``DEFAULT_TIME_BUDGET_NUMPY`` (5 ms) for the NumPy twin. The first call (or
+            the first after :meth:`reset`) gets ``COLD_FACTOR`` (20) times the budget: it
+            has to find the active rows from nothing. After the level sizes changed, the
+            active rows are forgotten but the last answer is kept as the start, and the
+            budget is the plain one.
         jit: run the iteration as one compiled call (:mod:`._activeset_jit`; ``None``:
             when numba is available and ``SOTPY_JIT`` is not ``0``).
     """
@@ -348,6 +351,16 @@ class HierarchySolver:
         """Forget the buffers and the warm start."""
         self._buf = None
 
+    def _resized(self, sizes: tuple[int, ...], n: int) -> _Buffers:
+        """New buffers for level sizes that changed: the active rows are forgotten (a cold
+        call), the last answer is kept when ``n`` is the same (the first level's start,
+        see :mod:`._activeset`)."""
+        buf = _Buffers(sizes, n)
+        old = self._buf
+        if old is not None and old.x.shape == buf.x.shape:
+            buf.x[:] = old.x
+        return buf
+
     # ------------------------------------------------------------------ solving
     def solve(self, levels, damping=None) -> HierarchyResult:
         """Solve the stack ``levels`` (highest priority first).
@@ -382,7 +395,7 @@ class HierarchySolver:
             sizes = tuple(int(m) for m in sizes)
             if any(m < 0 for m in sizes):
                 raise SolverError(f"HierarchySolver.stacked: negative level size in {sizes}")
-            buf = self._buf = _Buffers(sizes, self.n)
+            buf = self._buf = self._resized(sizes, self.n)
         return buf.A, buf.lo, buf.up, [int(s) for s in buf.starts]
 
     def solve_stacked(self, damping=None, *, equality: bool = False) -> HierarchyResult:
@@ -403,7 +416,7 @@ class HierarchySolver:
         p = len(buf.sizes)
         lams = _dampings(self.damping if damping is None else damping, p)
         budget = math.inf if self._time_budget is None else self._time_budget
-        if not buf.warm:
+        if not buf.warm and np.isnan(buf.x).any():  # the first call: nothing to start from
             budget *= COLD_FACTOR
         args = (buf.A, buf.lo, buf.up, buf.starts, buf.status, buf.attach, lams, self.rank_tol,
                 self.eps, self.dual_tol, self._max_iter, budget, buf.x, buf.res, buf.ranks,
@@ -423,6 +436,7 @@ class HierarchySolver:
         if info[3] != _activeset.OK:
             if info[3] == _activeset.NONFINITE_RESULT:
                 buf.status[:] = 0  # nothing to warm-start from
+                buf.x[:] = np.nan
             self._raise(buf, parsed, pair)
         buf.warm = True
         its, reason = int(info[0]), int(info[1])
@@ -487,7 +501,7 @@ class HierarchySolver:
         sizes = tuple(A.shape[0] for A in mats)
         buf = self._buf
         if buf is None or buf.sizes != sizes or buf.A.shape[1] != n:
-            buf = self._buf = _Buffers(sizes, n)
+            buf = self._buf = self._resized(sizes, n)
         if mats:
             np.concatenate(mats, out=buf.A)
             np.concatenate(los, out=buf.lo)
