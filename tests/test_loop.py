@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import sys
 import threading
@@ -92,6 +93,34 @@ def test_realtime_rate_100hz_for_one_second():
     assert s.latency_p99 < 0.5 * s.period
     assert s.misses <= 5 and s.fault is None
     assert "100 Hz" in str(s)
+
+
+class LoopTestHeap(LoopTestDevice):
+    """Records, at each tick, how many objects the collector holds frozen."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.frozen: list[int] = []
+
+    def increment(self, dt: float) -> None:
+        self.frozen.append(gc.get_freeze_count())
+        super().increment(dt)
+
+
+def test_a_realtime_run_ticks_on_a_frozen_heap_and_gives_it_back():
+    before = gc.get_freeze_count()
+    dev = LoopTestHeap("dev")
+    dev.control.value = np.ones(1)
+    loop = ControlLoop("loop", dev, 0.002)
+    loop.start(ticks=20)
+    assert loop.wait(5.0)
+    # the graph built before the run (the device, the loop, the signals) was frozen
+    assert min(dev.frozen) > before + 100
+    assert gc.get_freeze_count() == before  # given back at the end of the run
+    loop.run(5)  # run(): real-time too
+    assert min(dev.frozen[20:]) > before + 100 and gc.get_freeze_count() == before
+    loop.step(5)  # step(): as fast as possible, the collector as it is
+    assert dev.frozen[25:] == [before] * 5
 
 
 def test_absolute_deadlines_do_not_drift_with_tick_time():

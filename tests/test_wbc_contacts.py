@@ -267,6 +267,7 @@ def test_wrench_servo_drives_a_wrench_task():
     for f in robot.feet.values():
         ctrl.addContact(f.frame, 0.5, f.length, f.width, f.offset[0], f.offset[1], 6, 0.0)
     ctrl.addWrenchTask("leftWrench", FEET[0], 1.0, 0)
+    ctrl.addJointTask("posture", 1e-2, 1)  # below: the wrench task's level is not the last
     ctrl.setResolutionStrategy("MultiLevelWeighted")
     ctrl.activateTasksAndConstraints()
     ws = WrenchServo("wsServo")

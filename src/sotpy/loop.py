@@ -75,6 +75,17 @@ affected. ``step``/``run`` in the calling thread raise :class:`~sotpy.errors.Sot
 from the exception, or re-raise a ``KeyboardInterrupt``/``SystemExit`` after the safe
 stop (Ctrl-C still interrupts a script).
 
+The garbage collector
+---------------------
+A real-time run (``start``, ``run``) collects once before its first tick and then
+freezes the heap (:func:`frozenHeap`: ``gc.freeze``), until it ends: the collector's
+passes during the run scan only the objects the ticks allocate, not the graph, the
+models and the libraries built before. Without it, a Talos torque-level run (138,000
+tracked objects) paid a pass of the middle generation about every 300 ticks, 1.6 ms
+each, and once a pass of the oldest one of 74 ms; frozen, the passes take 13 to 34 us.
+``step`` (as fast as possible, often one tick at a time from a shell) leaves the
+collector as it is.
+
 Shutdown
 --------
 The loop is an entity: ``pool.remove(loop)`` or ``pool.clear()`` stops its thread
@@ -89,6 +100,7 @@ for a stop request meanwhile.
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import math
 import numbers
@@ -112,6 +124,7 @@ __all__ = [
     "ControlLoop",
     "LoopFault",
     "LoopStats",
+    "frozenHeap",
     "unlocked",
 ]
 
@@ -122,6 +135,37 @@ DEFAULT_SPIN = 200e-6
 #: Default number of recent ticks over which means and p99 are computed.
 DEFAULT_WINDOW = 10_000
 _LOCK_POLL = 0.05  # s: how often a thread waiting for pool.lock checks for a stop request
+
+_frozen = 0  # the frozenHeap contexts open (in any thread)
+_frozen_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def frozenHeap() -> Iterator[None]:
+    """While open: the heap as it was on entry, collected, is frozen (``gc.collect()``
+    then ``gc.freeze()``; see the module doc, "The garbage collector"). The collector
+    keeps running on what is allocated after; on the exit of the last open context,
+    ``gc.unfreeze()`` gives the frozen objects back to it. A real-time
+    :class:`ControlLoop` run opens one; a script that ticks a device in its own loop at
+    1 kHz can too::
+
+        with frozenHeap():
+            for _ in range(ticks):
+                device.increment(dt)
+    """
+    global _frozen
+    with _frozen_lock:
+        if _frozen == 0:
+            gc.collect()
+            gc.freeze()
+        _frozen += 1
+    try:
+        yield
+    finally:
+        with _frozen_lock:
+            _frozen -= 1
+            if _frozen == 0:
+                gc.unfreeze()
 
 
 @dataclass(frozen=True)
@@ -537,8 +581,12 @@ class ControlLoop(Entity):
             log.exception("%s: the loop thread failed", self._who("start"))
 
     def _loop(self, ticks: int | None, realtime: bool) -> BaseException | None:
-        """Run ``ticks`` ticks (None: until stopped); return what a tick raised (after the
-        safe stop), or None."""
+        """Run ``ticks`` ticks (None: until stopped), on a frozen heap when real-time;
+        return what a tick raised (after the safe stop), or None."""
+        with frozenHeap() if realtime else contextlib.nullcontext():
+            return self._ticks(ticks, realtime)
+
+    def _ticks(self, ticks: int | None, realtime: bool) -> BaseException | None:
         lock = pool.lock
         clock = time.perf_counter_ns
         stop = self._stopEvent

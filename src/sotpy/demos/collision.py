@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..graph import plug, pool
+from ..loop import frozenHeap
 
 __all__ = [
     "BALL_OFFSET",
@@ -235,9 +236,10 @@ def run_talos_collision(
     try:
         log = CollisionLog(r, sot, pairs, target, steps, dt)
         begin = time.perf_counter()
-        for _ in range(steps):
-            r.device.increment(dt)
-            log.record()
+        with frozenHeap():
+            for _ in range(steps):
+                r.device.increment(dt)
+                log.record()
         result = log.report(wall_time=time.perf_counter() - begin)
         for line in result["table"].splitlines():
             say(line)

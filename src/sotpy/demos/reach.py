@@ -74,6 +74,7 @@ import numpy as np
 
 from ..errors import RobotError
 from ..graph import plug, pool
+from ..loop import frozenHeap
 
 __all__ = [
     "COM_TOLERANCE",
@@ -329,9 +330,10 @@ def run_reach(
         log = ReachLog(r, sot, target, steps, dt, margin, gains, damping)
         say(log.header())
         begin = time.perf_counter()
-        for _ in range(steps):
-            r.device.increment(dt)
-            log.record()
+        with frozenHeap():
+            for _ in range(steps):
+                r.device.increment(dt)
+                log.record()
         result = log.report(wall_time=time.perf_counter() - begin)
         for line in result["table"].splitlines():
             say(line)

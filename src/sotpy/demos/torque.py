@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ..loop import frozenHeap
+
 __all__ = ["run_callbacks", "run_panda_torque", "run_talos_torque"]
 
 
@@ -66,16 +68,17 @@ def run_panda_torque(
     times, torques, errors, found = [], [], [], True
     limits = robot.model.effortLimit
     ratio = 0.0
-    for k in range(n):
-        device.increment(dt)
-        tau = ctrl.torque.value
-        ratio = max(ratio, float(np.max(np.abs(tau) / limits)))
-        found = found and bool(ctrl.solutionFound.value)
-        M = ctrl.eePose.value
-        ref = traj.pose.value
-        times.append(k * dt)
-        torques.append(tau)
-        errors.append(float(np.linalg.norm(M.translation - ref.translation)))
+    with frozenHeap():
+        for k in range(n):
+            device.increment(dt)
+            tau = ctrl.torque.value
+            ratio = max(ratio, float(np.max(np.abs(tau) / limits)))
+            found = found and bool(ctrl.solutionFound.value)
+            M = ctrl.eePose.value
+            ref = traj.pose.value
+            times.append(k * dt)
+            torques.append(tau)
+            errors.append(float(np.linalg.norm(M.translation - ref.translation)))
     M = ctrl.eePose.value
     final = float(np.linalg.norm(M.translation - goal.translation))
     out: dict[str, Any] = {
@@ -326,44 +329,45 @@ def run_talos_torque(
     corner_fz = np.zeros((n, 8))  # the floor's corner forces, left sole's then right's
     placements = np.empty((n, 2, 4))  # per sole: x, y, z displacement, rotation angle
     found = True
-    for k in range(n):
-        t = tick0 + k
-        if k == k_shift:  # the hand task ramps in where the hand is
-            hand_now = pin.SE3(ctrl.handPose.value)
-            hand_traj.setTrajectory(hand_now, hand_now, hand_ramp, t)
-            if pid[0] > 0:
-                hand_servo.resetIntegral()  # the PID starts from the hand where it is
-            ctrl.activate("hand")
-        if k == k_ramp:
-            hand_goal = pin.SE3(
-                hand_now.rotation, hand_now.translation + np.asarray(hand_offset, float)
-            )
-            hand_traj.setTrajectory(hand_now, hand_goal, duration, t)
-        if k == k_reach:
-            com_traj.setTrajectory(
-                pin.SE3(np.eye(3), com_goal), pin.SE3(np.eye(3), com0), duration, t
-            )
-        # the controller's outputs at the tick the device is about to apply (pool.time)
-        found = found and bool(ctrl.solutionFound.value)
-        torques[k] = ctrl.torque.value
-        ctrl_wrenches[k] = ctrl.wrenches.value.reshape(2, 6)
-        com_ref[k] = com_traj.pose.value.translation
-        if k >= k_shift:
-            hand_ref[k] = hand_traj.pose.value.translation
-            hands[k] = ctrl.handPose.value.translation
-        device.increment(dt)
-        q = device.state.value
-        pin.framesForwardKinematics(model, data, q)
-        forces = device.contactForces()  # of the step just taken, world axes
-        for i, (foot, fid) in enumerate(zip(feet, fids, strict=True)):
-            M = data.oMf[fid]
-            wrenches[k, i] = _local_wrench(M.rotation, forces[foot.frame])
-            placements[k, i, :3] = M.translation - sole0[i].translation
-            placements[k, i, 3] = np.linalg.norm(pin.log3(sole0[i].rotation.T @ M.rotation))
-        for p in device.contactPoints():  # a corner off the floor is not listed: 0
-            corner_fz[k, 4 * (p.frame == feet[1].frame) + p.index] = p.force[2]
-        coms[k] = pin.centerOfMass(model, data, q)
-        times[k] = (k + 1) * dt
+    with frozenHeap():
+        for k in range(n):
+            t = tick0 + k
+            if k == k_shift:  # the hand task ramps in where the hand is
+                hand_now = pin.SE3(ctrl.handPose.value)
+                hand_traj.setTrajectory(hand_now, hand_now, hand_ramp, t)
+                if pid[0] > 0:
+                    hand_servo.resetIntegral()  # the PID starts from the hand where it is
+                ctrl.activate("hand")
+            if k == k_ramp:
+                hand_goal = pin.SE3(
+                    hand_now.rotation, hand_now.translation + np.asarray(hand_offset, float)
+                )
+                hand_traj.setTrajectory(hand_now, hand_goal, duration, t)
+            if k == k_reach:
+                com_traj.setTrajectory(
+                    pin.SE3(np.eye(3), com_goal), pin.SE3(np.eye(3), com0), duration, t
+                )
+            # the controller's outputs at the tick the device is about to apply (pool.time)
+            found = found and bool(ctrl.solutionFound.value)
+            torques[k] = ctrl.torque.value
+            ctrl_wrenches[k] = ctrl.wrenches.value.reshape(2, 6)
+            com_ref[k] = com_traj.pose.value.translation
+            if k >= k_shift:
+                hand_ref[k] = hand_traj.pose.value.translation
+                hands[k] = ctrl.handPose.value.translation
+            device.increment(dt)
+            q = device.state.value
+            pin.framesForwardKinematics(model, data, q)
+            forces = device.contactForces()  # of the step just taken, world axes
+            for i, (foot, fid) in enumerate(zip(feet, fids, strict=True)):
+                M = data.oMf[fid]
+                wrenches[k, i] = _local_wrench(M.rotation, forces[foot.frame])
+                placements[k, i, :3] = M.translation - sole0[i].translation
+                placements[k, i, 3] = np.linalg.norm(pin.log3(sole0[i].rotation.T @ M.rotation))
+            for p in device.contactPoints():  # a corner off the floor is not listed: 0
+                corner_fz[k, 4 * (p.frame == feet[1].frame) + p.index] = p.force[2]
+            coms[k] = pin.centerOfMass(model, data, q)
+            times[k] = (k + 1) * dt
 
     out = _talos_checks(
         times, coms, com_ref, hands, hand_ref, wrenches, ctrl_wrenches, torques, placements,

@@ -83,9 +83,9 @@ _STATUS = ("optimal", "iterations", "time")
 #: iteration and gets ten times the budget
 DEFAULT_TIME_BUDGET = 5e-4
 DEFAULT_TIME_BUDGET_NUMPY = 5e-3
-#: the budget of a solver's first call (no previous answer, no active rows), as a multiple
-#: of the time budget: it finds the active rows from nothing. A call after the level sizes
-#: changed starts from the last answer and has the plain budget
+#: the budget of a call without the full warm start (a solver's first call; the first
+#: after the level sizes changed, whose changed levels start with no active row), as a
+#: multiple of the time budget
 COLD_FACTOR = 20.0
 DEFAULT_MAX_ITER = 200
 _DEFAULT = object()
@@ -263,11 +263,12 @@ class HierarchySolver:
         time_budget: time budget of a call, in seconds of the calling thread's CPU time
             (> 0, finite, or ``None`` for none); exceeded by at most one iteration.
             Default: ``DEFAULT_TIME_BUDGET`` (0.5 ms) compiled,
-            ``DEFAULT_TIME_BUDGET_NUMPY`` (5 ms) for the NumPy twin. The first call (or
-            the first after :meth:`reset`) gets ``COLD_FACTOR`` (20) times the budget: it
-            has to find the active rows from nothing. After the level sizes changed, the
-            active rows are forgotten but the last answer is kept as the start, and the
-            budget is the plain one.
+            ``DEFAULT_TIME_BUDGET_NUMPY`` (5 ms) for the NumPy twin. A call without the
+            full warm start gets ``COLD_FACTOR`` (20) times the budget: the first one
+            (or the first after :meth:`reset`), which has to find the active rows from
+            nothing, and the first after the level sizes changed (the levels of
+            unchanged size keep their active rows and the last answer is the start, but
+            the levels that changed start with none).
         jit: run the iteration as one compiled call (:mod:`._activeset_jit`; ``None``:
             when numba is available and ``SOTPY_JIT`` is not ``0``).
     """
@@ -352,13 +353,21 @@ class HierarchySolver:
         self._buf = None
 
     def _resized(self, sizes: tuple[int, ...], n: int) -> _Buffers:
-        """New buffers for level sizes that changed: the active rows are forgotten (a cold
-        call), the last answer is kept when ``n`` is the same (the first level's start,
-        see :mod:`._activeset`)."""
+        """New buffers for level sizes that changed (a task pushed, collision pairs that
+        came within reach): with the same ``n`` and number of levels, the levels whose
+        size did not change keep their rows' warm start (a guess, which the solver
+        checks) and the last answer is kept (the first level's start, see
+        :mod:`._activeset`); the rows of the levels that changed start inactive."""
         buf = _Buffers(sizes, n)
         old = self._buf
-        if old is not None and old.x.shape == buf.x.shape:
-            buf.x[:] = old.x
+        if old is None or old.x.shape != buf.x.shape:
+            return buf
+        buf.x[:] = old.x
+        if len(old.sizes) == len(sizes):
+            for k, (a, b) in enumerate(zip(old.starts[:-1], buf.starts[:-1], strict=True)):
+                if old.sizes[k] == sizes[k]:
+                    buf.status[b : b + sizes[k]] = old.status[a : a + sizes[k]]
+                    buf.attach[b : b + sizes[k]] = old.attach[a : a + sizes[k]]
         return buf
 
     # ------------------------------------------------------------------ solving
@@ -416,7 +425,7 @@ class HierarchySolver:
         p = len(buf.sizes)
         lams = _dampings(self.damping if damping is None else damping, p)
         budget = math.inf if self._time_budget is None else self._time_budget
-        if not buf.warm and np.isnan(buf.x).any():  # the first call: nothing to start from
+        if not buf.warm:  # the first call, or the first after the level sizes changed
             budget *= COLD_FACTOR
         args = (buf.A, buf.lo, buf.up, buf.starts, buf.status, buf.attach, lams, self.rank_tol,
                 self.eps, self.dual_tol, self._max_iter, budget, buf.x, buf.res, buf.ranks,

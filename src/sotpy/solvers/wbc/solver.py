@@ -30,7 +30,10 @@ is::
     level 0 (hard):  the unactuated rows of A_dyn chi = c_dyn  and  lb <= C chi <= ub
     (level 1:        the torque-rate rows of a transition, when they are on)
     level 1..L:      the tasks of level 0, 1, ... (user numbering), each task's rows
-                     scaled by sqrt(diag W_k): the level's least squares is weighted
+                     scaled by sqrt(diag W_k): the level's least squares is weighted;
+                     the contact wrench cost's rows join the last task level (with
+                     their weight, as in the weighted strategy: a level of their own
+                     below would get no freedom once a posture fills the last one)
     then:            min ||(a, f)||  (the solver's final minimum-norm step)
 
 The hard level is "hard" because it comes first: if it can be met, every solution
@@ -627,9 +630,13 @@ class WholeBodyController:
         levels: list[tuple] = [hard]
         if nr:  # the torque-rate rows of a transition: a level of their own, after the hard
             levels.append((Cy[m:], lo_y[m:], hi_y[m:]))  # one (their least violation)
-        order = [*sorted({t[0] for t in tasks if t[0] >= 0}), -1]  # -1: the contact cost
+        # the contact wrench cost (level -1) joins the last task level, with its weight:
+        # a level of its own below would get only the freedom the posture leaves (none
+        # on a humanoid), and a light foot's wrench would sit on its cone's edges
+        order = sorted({t[0] for t in tasks if t[0] >= 0}) or [-1]
         for lvl in order:
-            rows = [(E, f, w) for (k, E, f, w) in tasks if k == lvl]
+            last = lvl == order[-1]
+            rows = [(E, f, w) for (k, E, f, w) in tasks if k == lvl or (last and k == -1)]
             if not rows:
                 continue
             E = np.vstack([q[0] for q in rows])
