@@ -15,11 +15,13 @@ from hypothesis.extra.numpy import arrays
 from sotpy.bridge.encoding import (
     HEADER,
     SampleError,
+    checked,
     decode,
     decodeJointState,
     encode,
     encodeJointState,
     expectedShape,
+    pack,
 )
 from sotpy.errors import BridgeError
 
@@ -46,6 +48,24 @@ def test_matrix_round_trip_is_exact_and_row_major(m):
     assert decode(encode("matrix", np.asfortranarray(m), 1, 2), "matrix")[2].tobytes() == (
         np.ascontiguousarray(m).tobytes()
     )
+
+
+def test_a_checked_value_is_a_copy_for_the_send_thread():
+    """The publisher's trigger checks and copies on the tick's thread, its send thread
+    packs later: the signal's array written in place meanwhile must not reach the
+    sample."""
+    v = np.arange(38.0)
+    M = pin.SE3(pin.utils.rpyToMatrix(0.1, -0.2, 0.3), np.array([1.0, 2.0, 3.0]))
+    jobs = [("vector", v, (38,)), ("matrix", v.reshape(2, 19), (2, 19)), ("SE3", M, None)]
+    out = [(name, checked(name, value, shape)) for name, value, shape in jobs]
+    v[:] = -1.0
+    M.translation = np.zeros(3)
+    _, _, got = decode(pack(*out[0][1], 1, 2), "vector", (38,))
+    assert np.array_equal(got, np.arange(38.0))
+    _, _, got = decode(pack(*out[1][1], 1, 2), "matrix", (2, 19))
+    assert np.array_equal(got, np.arange(38.0).reshape(2, 19))
+    _, _, got = decode(pack(*out[2][1], 1, 2), "SE3")
+    assert np.array_equal(got.translation, [1.0, 2.0, 3.0])
 
 
 def test_scalars_se3_and_string_round_trip():

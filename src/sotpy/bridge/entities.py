@@ -20,10 +20,11 @@ per key (:mod:`sotpy.bridge.encoding`: header with the sample's number and ``t``
 the value). ``setPeriod(k)`` sends every ``k``-th tick (so does
 ``device.after.addDownsampledSignal(pub.trigger, k)``, SoT's way). A value the encoding
 refuses (a NaN) raises :class:`~sotpy.errors.BridgeError` from ``trigger``: nothing is
-sent. The trigger encodes; a thread of the publisher puts the samples, in order, as
-soon as the tick's thread releases the interpreter (its next sleep or wait;
-``setSendThread(False)`` puts them at once, on the tick's thread), with congestion
-control DROP (never blocked by the network) and ``express`` (no batching).
+sent. The trigger checks and copies each value; a thread of the publisher, which looks
+for them every :data:`SEND_POLL` s, packs and puts the samples, in order, once the
+tick's thread releases the interpreter (its next sleep or wait; ``setSendThread(False)``
+packs and puts them at once, on the tick's thread), with congestion control DROP (never
+blocked by the network) and ``express`` (no batching).
 A process without a device ticks a publisher with ``ControlLoop("loop", pub, dt)``:
 :meth:`ZenohPublish.increment` reads the trigger at the publisher's tick and moves it
 on.
@@ -93,7 +94,7 @@ from ..graph import BOOL, DOUBLE, INT, MATRIX, STRING, VECTOR, Entity, Output, P
 from ..graph.pool import pool
 from ..graph.signal import FORCE, InputSignal, OutputSignal
 from ..graph.types import SignalType
-from .encoding import MAX_SAMPLE_BYTES, SampleError, decode, encode, expectedShape
+from .encoding import MAX_SAMPLE_BYTES, SampleError, checked, decode, expectedShape, pack
 
 __all__ = [
     "EXTRA",
@@ -346,47 +347,51 @@ def _put(key: Any, data: bytes) -> None:
         key.pub.put(data)
 
 
-class _Sender:
-    """Puts the samples a publisher's trigger encoded, in order, from a thread of its own.
+#: how often a publisher's send thread looks for queued samples (s)
+SEND_POLL = 2e-4
 
-    Measured (bench_zenoh, a 38-vector published after each Talos reach tick at 1 kHz,
-    on a loaded 2-core machine): put on the tick's thread, the trigger took 12-13 % of
-    the tick's thread CPU and 25 % of its wall time (the put's system call wakes the
-    subscriber's process, which takes the core); queued to this thread, 7 % of both.
-    The price is latency: the round trip of the same benchmark grew from 510-550 to
-    670-750 us (p50), the time for this thread to wake and take the interpreter, which
-    it gets when the tick's thread next sleeps or waits. ``setSendThread(False)`` puts
-    on the tick's thread instead.
+
+class _Sender:
+    """Packs and puts the samples a publisher's trigger checked, in order, from a thread
+    of its own that looks for them every :data:`SEND_POLL` seconds.
+
+    The tick's thread only checks each value and copies it (:func:`.encoding.checked`)
+    and queues it: nothing wakes this thread, which sleeps (the interpreter released)
+    and, when it wakes, gets the interpreter once the tick's thread sleeps in its turn.
+    Measured in the tick's thread (bench_zenoh's publisher of a 38-vector after each
+    Talos reach tick at 1 kHz, thread CPU time, quiet 2-core machine): the graph's
+    evaluation of the trigger 2 to 3 us, the check and copy about 10 us cold (2 us hot),
+    the packing 8 us, and a wake-up of this thread per tick 12 us with a pipe, 23 us
+    with a ``threading.Event`` (the system call and the other core's wake-up count in
+    the caller's CPU time); the poll costs none of these. A put on the tick's thread
+    (``setSendThread(False)``) pays the packing and the put's system call there instead
+    (it wakes the subscriber's process, which can take the core), and saves up to
+    :data:`SEND_POLL` of latency.
     """
 
     def __init__(self, who: str) -> None:
         self._who = who
-        self._items: collections.deque[tuple[Any, bytes]] = collections.deque()
-        self._event = threading.Event()
+        self._items: collections.deque[tuple[Any, int, Any, int, int]] = collections.deque()
         self._closed = False
         self._failed: set[str] = set()
         self._thread = threading.Thread(target=self._run, name=f"{who} sender", daemon=True)
         self._thread.start()
         _senders.add(self)
 
-    def queue(self, key: Any, data: bytes) -> None:
-        self._items.append((key, data))
-
-    def wake(self) -> None:
-        self._event.set()
+    def queue(self, key: Any, code: int, payload: Any, seq: int, tick: int) -> None:
+        self._items.append((key, code, payload, seq, tick))
 
     def _run(self) -> None:
         while not self._closed:
-            self._event.wait()
-            self._event.clear()
+            time.sleep(SEND_POLL)
             self._drain()
 
     def _drain(self) -> None:
         items = self._items
         while items:
-            key, data = items.popleft()
+            key, code, payload, seq, tick = items.popleft()
             try:
-                _put(key, data)
+                _put(key, pack(code, payload, seq, tick))
             except Exception as exc:  # the session closed, Zenoh refused: say it once
                 if key.key not in self._failed:
                     self._failed.add(key.key)
@@ -397,7 +402,6 @@ class _Sender:
         if self._closed:
             return
         self._closed = True
-        self._event.set()
         if self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self._drain()
@@ -432,21 +436,19 @@ class ZenohPublish(_BridgeEntity):
         sender = self._sender
         for k, v in zip(self._order, values, strict=True):
             try:
-                data = encode(k.typeName, v, k.seq, t, k.shape)
+                code, payload = checked(k.typeName, v, k.shape)
             except SampleError as exc:
                 raise BridgeError(
                     f"{self.className}({self.name})::input({k.typeName})::{k.name}: not sent "
                     f"on {k.key!r} at tick {t}: {exc}"
                 ) from None
             if sender is None:
-                _put(k, data)
+                _put(k, pack(code, payload, k.seq, t))
             else:
-                sender.queue(k, data)
+                sender.queue(k, code, payload, k.seq, t)
             k.seq += 1
             k.sent += 1
             self._sent += 1
-        if sender is not None:
-            sender.wake()
         return self._sent
 
     def __init__(self, name: str, config: Any = None) -> None:
@@ -522,8 +524,9 @@ class ZenohPublish(_BridgeEntity):
     def setSendThread(self, enabled: bool) -> None:
         """Put the samples from a thread of the publisher (default), or on the tick's
 
-        With the thread, a trigger only encodes and queues (a few us per key) and the
-        samples leave when the tick's thread next sleeps or waits; without it, each put
+        With the thread, a trigger only checks, copies and queues (a few us per key) and
+        the samples leave within :data:`SEND_POLL` s, once the tick's thread sleeps or
+        waits; without it, each put
         (a system call, which may let the subscriber's process take the core) runs in
         the tick, and the samples leave at once (lower latency, a longer tick). See
         docs/zenoh.md, "What it costs".
