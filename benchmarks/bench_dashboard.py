@@ -52,8 +52,9 @@ PLOTS = (  # (signal, components): 5 plots of 3 lines
 def _ticks(loop) -> np.ndarray:
     """The tick times (s) of the phase just run: the loop's own record of each tick
     (``LoopStats`` gives mean and p99; the median needs the samples)."""
-    n = min(loop.ticks, len(loop._tickNs))
-    return loop._tickNs[:n].astype(float) * 1e-9
+    tick_ns = loop._stats.tickNs  # the last `window` ticks' durations, a ring
+    n = min(loop.ticks, len(tick_ns))
+    return tick_ns[:n].astype(float) * 1e-9
 
 
 def _phase(loop, seconds: float) -> np.ndarray:
