@@ -85,6 +85,7 @@ from sotpy._bench import machine_line
 from sotpy.dynamics import load_robot
 from sotpy.errors import SotpyWarning
 from sotpy.graph import plug, pool
+from sotpy.loop import frozenHeap
 from sotpy.solvers import SOT
 from sotpy.tasks import (
     MetaTaskKine6d,
@@ -589,11 +590,13 @@ def interleave(
     runners: Sequence[SotpyRunner | PinkRunner], ticks: int, chunk: int = CHUNK
 ) -> list[Episode]:
     """Run ``ticks`` ticks of every runner, taking turns every ``chunk`` ticks (so that
-    a change of the machine's load hits them alike); their episodes, in order."""
-    gc.collect()
-    for start in range(0, ticks, chunk):
-        for r in runners:
-            r.run(min(chunk, ticks - start))
+    a change of the machine's load hits them alike), on a frozen heap as a real-time
+    ``ControlLoop`` runs (``sotpy.loop.frozenHeap``; Pink's runners too); their
+    episodes, in order."""
+    with frozenHeap():
+        for start in range(0, ticks, chunk):
+            for r in runners:
+                r.run(min(chunk, ticks - start))
     return [r.finish() for r in runners]
 
 
