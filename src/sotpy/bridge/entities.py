@@ -21,7 +21,7 @@ the value). ``setPeriod(k)`` sends every ``k``-th tick (so does
 ``device.after.addDownsampledSignal(pub.trigger, k)``, SoT's way). A value the encoding
 refuses (a NaN) raises :class:`~sotpy.errors.BridgeError` from ``trigger``: nothing is
 sent. The trigger checks and copies each value; a thread of the publisher, which looks
-for them every :data:`SEND_POLL` s, packs and puts the samples, in order, once the
+for them every ``SEND_POLL`` s, packs and puts the samples, in order, once the
 tick's thread releases the interpreter (its next sleep or wait; ``setSendThread(False)``
 packs and puts them at once, on the tick's thread), with congestion control DROP (never
 blocked by the network) and ``express`` (no batching).
@@ -353,7 +353,7 @@ SEND_POLL = 2e-4
 
 class _Sender:
     """Packs and puts the samples a publisher's trigger checked, in order, from a thread
-    of its own that looks for them every :data:`SEND_POLL` seconds.
+    of its own that looks for them every ``SEND_POLL`` seconds.
 
     The tick's thread only checks each value and copies it (:func:`.encoding.checked`)
     and queues it: nothing wakes this thread, which sleeps (the interpreter released)
@@ -366,7 +366,7 @@ class _Sender:
     the caller's CPU time); the poll costs none of these. A put on the tick's thread
     (``setSendThread(False)``) pays the packing and the put's system call there instead
     (it wakes the subscriber's process, which can take the core), and saves up to
-    :data:`SEND_POLL` of latency.
+    ``SEND_POLL`` of latency.
     """
 
     def __init__(self, who: str) -> None:
@@ -525,7 +525,7 @@ class ZenohPublish(_BridgeEntity):
         """Put the samples from a thread of the publisher (default), or on the tick's
 
         With the thread, a trigger only checks, copies and queues (a few us per key) and
-        the samples leave within :data:`SEND_POLL` s, once the tick's thread sleeps or
+        the samples leave within ``SEND_POLL`` s, once the tick's thread sleeps or
         waits; without it, each put
         (a system call, which may let the subscriber's process take the core) runs in
         the tick, and the samples leave at once (lower latency, a longer tick). See
