@@ -106,6 +106,7 @@ ROTATION_TOLERANCE = 1e-9
 
 _H = HEADER.size  # 24
 _LE_F64 = np.dtype("<f8")
+_ARRAY_HEAD = _H + _DIMS.size  # header and dimensions of a vector, a matrix, a string
 
 
 class SampleError(BridgeError):
@@ -175,12 +176,21 @@ def checked(
     shape other than ``shape``, more than ``limit`` bytes).
     """
     code = TYPE_CODES.get(typeName)
-    if code is None:
+    payload: Any
+    if code == 4 or code == 5:  # first: what a robot publishes at every tick
+        a = np.array(value, dtype=_LE_F64, order="C")
+        if a.ndim != code - 3:
+            raise _fail(f"a {typeName} must be {code - 3}-D, got shape {a.shape}", "type")
+        if shape is not None and a.shape != shape:
+            raise _fail(f"{typeName} of shape {a.shape}, declared {shape}", "size")
+        if a.size and math.isnan(a.min()):  # min propagates NaN (see _has_nan)
+            raise _fail(f"a {typeName} with NaN entries", "value")
+        payload, size = a, _ARRAY_HEAD + a.nbytes
+    elif code is None:
         raise BridgeError(
             f"no wire encoding for signal type {typeName!r}; encoded types: {', '.join(TYPE_CODES)}"
         )
-    payload: Any
-    if code == 1:
+    elif code == 1:
         payload = float(value)
         if math.isnan(payload):
             raise _fail("a NaN double", "value")
@@ -189,15 +199,6 @@ def checked(
         payload, size = int(value), _H + 8
     elif code == 3:
         payload, size = bool(value), _H + 1
-    elif code in (4, 5):
-        a = np.array(value, dtype=_LE_F64, order="C")
-        if a.ndim != code - 3:
-            raise _fail(f"a {typeName} must be {code - 3}-D, got shape {a.shape}", "type")
-        if shape is not None and a.shape != shape:
-            raise _fail(f"{typeName} of shape {a.shape}, declared {shape}", "size")
-        if _has_nan(a):
-            raise _fail(f"a {typeName} with NaN entries", "value")
-        payload, size = a, _H + _DIMS.size + a.nbytes
     elif code == 6:
         t = np.array(value.translation, dtype="<f8")
         R = np.array(value.rotation, dtype="<f8", order="C")
@@ -207,7 +208,7 @@ def checked(
         payload, size = (t, R), _H + 96
     else:
         payload = str(value).encode("utf-8")
-        size = _H + _DIMS.size + len(payload)
+        size = _ARRAY_HEAD + len(payload)
     if size > limit:
         raise _fail(f"sample of {size} bytes, limit {limit}", "oversized")
     return code, payload

@@ -372,14 +372,13 @@ class _Sender:
     def __init__(self, who: str) -> None:
         self._who = who
         self._items: collections.deque[tuple[Any, int, Any, int, int]] = collections.deque()
+        #: queue((key, code, payload, seq, tick)): a sample for the thread to pack and put
+        self.queue = self._items.append
         self._closed = False
         self._failed: set[str] = set()
         self._thread = threading.Thread(target=self._run, name=f"{who} sender", daemon=True)
         self._thread.start()
         _senders.add(self)
-
-    def queue(self, key: Any, code: int, payload: Any, seq: int, tick: int) -> None:
-        self._items.append((key, code, payload, seq, tick))
 
     def _run(self) -> None:
         while not self._closed:
@@ -434,6 +433,7 @@ class ZenohPublish(_BridgeEntity):
     def trigger(self, t: int, *values: Any) -> int:
         """Reads every input at t and sends one sample per key."""
         sender = self._sender
+        queue = None if sender is None else sender.queue
         for k, v in zip(self._order, values, strict=True):
             try:
                 code, payload = checked(k.typeName, v, k.shape)
@@ -442,10 +442,10 @@ class ZenohPublish(_BridgeEntity):
                     f"{self.className}({self.name})::input({k.typeName})::{k.name}: not sent "
                     f"on {k.key!r} at tick {t}: {exc}"
                 ) from None
-            if sender is None:
+            if queue is None:
                 _put(k, pack(code, payload, k.seq, t))
             else:
-                sender.queue(k, code, payload, k.seq, t)
+                queue((k, code, payload, k.seq, t))
             k.seq += 1
             k.sent += 1
             self._sent += 1
