@@ -91,6 +91,33 @@ def test_a_stack_of_other_sizes_starts_from_an_unrelated_answer(seed, jit):
     assert np.linalg.norm(res.x - x_ref) <= 1e-5 * (1.0 + np.linalg.norm(x_ref))
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_both_twins_follow_a_drifting_stack_alike(seed):
+    """Warm calls (the previous answer and active rows as the start): the twins give the
+    same answers, tick by tick, for about the same work. (Their paths can part: a tie
+    broken differently in one tick, see above, is a different warm start for the
+    next.)"""
+    if compiled is None:
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(200 + seed)
+    base = adversarial(200 + seed)
+    dA = [rng.standard_normal(A.shape) for A, _, _ in base]
+    db = [rng.standard_normal(len(lo)) for _, lo, _ in base]
+    twins = [HierarchySolver(jit=j, time_budget=None, max_iter=1000) for j in (False, True)]
+    work = np.zeros(2)
+    for t in range(8):
+        s = 0.02 * np.sin(0.3 * t)
+        levels = [
+            (A + s * np.abs(A).max() * a, lo + s * b, up + s * b)
+            for (A, lo, up), a, b in zip(base, dA, db, strict=True)
+        ]
+        a, b = (solver.solve(levels) for solver in twins)
+        assert a.converged and b.converged
+        np.testing.assert_allclose(a.x, b.x, atol=1e-7 * (1.0 + np.abs(a.x).max()))
+        work += (a.iterations, b.iterations)
+    assert 0.8 <= work[0] / work[1] <= 1.25
+
+
 #: three ticks of the Talos torque hierarchy (``sotpy demo talos-torque``, strategy
 #: ``MultiLevelWeighted``, 1 s CoM shift, t = 0.75 to 0.98 s: the right foot unloading),
 #: each with the previous tick's active rows and answer: levels [144, 35, 10] over y =
