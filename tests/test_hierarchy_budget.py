@@ -24,6 +24,7 @@ from sotpy.graph import Entity
 from sotpy.loop import ControlLoop
 from sotpy.solvers import HierarchySolver
 from sotpy.solvers._activeset_jit import solve as compiled
+from sotpy.solvers.hierarchy import SolverError
 from sotpy.solvers.sot import SOT
 from sotpy.tasks import FeatureGeneric, Task, TaskInequality
 
@@ -116,6 +117,23 @@ def test_both_twins_follow_a_drifting_stack_alike(seed):
         np.testing.assert_allclose(a.x, b.x, atol=1e-7 * (1.0 + np.abs(a.x).max()))
         work += (a.iterations, b.iterations)
     assert 0.8 <= work[0] / work[1] <= 1.25
+
+
+@pytest.mark.parametrize("jit", JITS)
+def test_a_refused_call_keeps_the_warm_start(jit):
+    """A stack refused for a NaN (same sizes, so the same buffers) leaves the last answer
+    and the active rows as they were: the next good call starts from them."""
+    levels = adversarial(3)
+    solver = HierarchySolver(jit=jit, time_budget=None, max_iter=1000)
+    first = solver.solve(levels)
+    bad = [(A.copy(), lo, up) for A, lo, up in levels]
+    bad[-1][0][0, 0] = np.nan
+    with pytest.raises(SolverError, match="not finite"):
+        solver.solve(bad)
+    np.testing.assert_array_equal(solver._buf.x, first.x)  # the kernel's next start
+    again = solver.solve(levels)
+    assert again.iterations == 1  # the warm start was kept: its eHQP is the answer
+    np.testing.assert_allclose(again.x, first.x, atol=1e-9 * (1.0 + np.abs(first.x).max()))
 
 
 #: three ticks of the Talos torque hierarchy (``sotpy demo talos-torque``, strategy

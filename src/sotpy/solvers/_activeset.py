@@ -121,7 +121,8 @@ current point up to the first inactive row of the levels ``<= j`` it would leave
 the levels below, so level ``j`` is no worse than when the phase began and no row of
 the levels ``<= j`` is left. ``info[2]`` is ``j`` (``p + 1``: optimal).
 
-Input: ``x`` holds the previous call's answer (NaN: none). Output: ``x``, ``res``
+Input: ``x`` holds the previous call's answer (NaN: none; a refused input leaves it as
+it was). Output: ``x``, ``res``
 (``||v_k(x)||`` per level), ``ranks`` (the directions each level's rows fixed, its held
 rows included), ``fro`` (``||A_k||_F``), ``info = [iterations, reason, solved levels,
 error, error row, error column, active inequality rows, inequality rows]``; ``reason``:
@@ -303,7 +304,6 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     m = A.shape[0]
     p = len(starts) - 1
     info[:] = 0
-    x_out[:] = 0.0
     res[:] = 0.0
     ranks[:] = 0
     with np.errstate(invalid="ignore"):

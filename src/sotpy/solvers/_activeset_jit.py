@@ -618,10 +618,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         x = np.zeros(n)
         xprev = np.empty(n)  # the previous call's answer (NaN: none)
         warm = True
-        for col in range(n):
+        for col in range(n):  # x_out is written at the end only: a refused input keeps it
             xprev[col] = x_out[col]
             warm = warm and math.isfinite(xprev[col])
-            x_out[col] = 0.0
         for k in range(p):
             res[k] = 0.0
             ranks_out[k] = 0
