@@ -83,41 +83,48 @@ def _summary(times_us, hits, its, cpu_us, first) -> dict[str, Any]:
     }
 
 
+def _cold(solver: HierarchySolver, sizes: tuple[int, ...] | None = None) -> bool:
+    """Whether the solver's next call gets the cold budget (``COLD_FACTOR`` times: no
+    buffers yet, no warm start, or level sizes other than ``sizes``)."""
+    buf = solver._buf
+    return buf is None or not buf.warm or (sizes is not None and buf.sizes != sizes)
+
+
 def kinematic(n_stacks: int, ticks: int) -> dict[str, dict[str, Any]]:
-    """The cold and drifting runs over ``n_stacks`` seeded stacks."""
-    out = {}
-    with frozenHeap():  # as a ControlLoop runs
-        return _kinematic(n_stacks, ticks, out)
+    """The cold and drifting runs over ``n_stacks`` seeded stacks, on a frozen heap (as a
+    ControlLoop runs)."""
+    with frozenHeap():
+        return {mode: _kinematic(mode, n_stacks, ticks) for mode in ("cold", "drifting")}
 
 
-def _kinematic(n_stacks: int, ticks: int, out: dict) -> dict[str, dict[str, Any]]:
-    for mode in ("cold", "drifting"):
-        times, cpus, hits, its, gaps, first = [], [], [], [], [], []
-        for seed in range(n_stacks):
-            rng = np.random.default_rng(seed)
-            base = adversarial_stack(rng)
-            solver = HierarchySolver()
-            steps = [base] if mode == "cold" else [drifted(base, rng, t) for t in range(ticks)]
-            for levels in steps:
-                if mode == "cold":
-                    solver = HierarchySolver()
-                first.append(solver._buf is None)
-                t0, c0 = time.perf_counter(), time.thread_time()
-                r = solver.solve(levels)
-                times.append((time.perf_counter() - t0) * 1e6)
-                cpus.append((time.thread_time() - c0) * 1e6)
-                hits.append(r.budget_hit)
-                its.append(r.iterations)
-                if not r.budget_hit and len(gaps) < 300:
-                    exact = HierarchySolver(time_budget=None, max_iter=10_000).solve(levels)
-                    if not exact.converged:
-                        raise RuntimeError(f"stack {seed}: no optimum without a budget either")
-                    scale = 1.0 + float(np.abs(exact.residuals).max())
-                    gaps.append(float(np.abs(r.residuals - exact.residuals).max()) / scale)
-        s = _summary(times, hits, its, cpus, first)
-        s["gap"] = max(gaps) if gaps else 0.0
-        out[mode] = s
-    return out
+def _kinematic(mode: str, n_stacks: int, ticks: int) -> dict[str, Any]:
+    """One mode (``"cold"``: a new solver per stack; ``"drifting"``: one solver along
+    the ticks) over ``n_stacks`` seeded stacks."""
+    times, cpus, hits, its, gaps, first = [], [], [], [], [], []
+    for seed in range(n_stacks):
+        rng = np.random.default_rng(seed)
+        base = adversarial_stack(rng)
+        solver = HierarchySolver()
+        steps = [base] if mode == "cold" else [drifted(base, rng, t) for t in range(ticks)]
+        for levels in steps:
+            if mode == "cold":
+                solver = HierarchySolver()
+            first.append(_cold(solver))
+            t0, c0 = time.perf_counter(), time.thread_time()
+            r = solver.solve(levels)
+            times.append((time.perf_counter() - t0) * 1e6)
+            cpus.append((time.thread_time() - c0) * 1e6)
+            hits.append(r.budget_hit)
+            its.append(r.iterations)
+            if not r.budget_hit and len(gaps) < 300:
+                exact = HierarchySolver(time_budget=None, max_iter=10_000).solve(levels)
+                if not exact.converged:
+                    raise RuntimeError(f"stack {seed}: no optimum without a budget either")
+                scale = 1.0 + float(np.abs(exact.residuals).max())
+                gaps.append(float(np.abs(r.residuals - exact.residuals).max()) / scale)
+    s = _summary(times, hits, its, cpus, first)
+    s["gap"] = max(gaps) if gaps else 0.0
+    return s
 
 
 def sot_limits(ticks: int) -> dict[str, Any]:
@@ -139,22 +146,23 @@ def sot_limits(ticks: int) -> dict[str, Any]:
     scene = bench_sot.reach_scene("talos")
     c = bench_sot.build_sotpy_tutorial(scene)
     solver = c.sot._solver
-    calls: list[tuple[float, float]] = []
+    calls: list[tuple[float, float, bool]] = []
     for name in ("solve", "solve_stacked"):
         real = getattr(solver, name)
 
         def timed(*a, real=real, **k):
+            cold = _cold(solver)  # solve_stacked: stacked() has made the buffers
             t0, c0 = time.perf_counter(), time.thread_time()
             try:
                 return real(*a, **k)
             finally:
-                calls.append(((time.perf_counter() - t0) * 1e6, (time.thread_time() - c0) * 1e6))
+                wall, cpu = (time.perf_counter() - t0) * 1e6, (time.thread_time() - c0) * 1e6
+                calls.append((wall, cpu, cold))
 
         setattr(solver, name, timed)
     vmax = np.asarray(c.sot.upperVl.value).copy()
     c.sot.upperVl.value = vmax
-    times, cpus, hits, its = [], [], [], []
-    first = [solver._buf is None]  # the first tick's solve, then the others
+    times, cpus, hits, its, first = [], [], [], [], []
     with frozenHeap():  # as a ControlLoop runs it
         for k in range(ticks):
             if k == ticks // 4:
@@ -163,10 +171,10 @@ def sot_limits(ticks: int) -> dict[str, Any]:
                 c.sot.upperVl.value = vmax
             n = len(calls)
             c.device.increment(bench_sot.DT)
-            times.append(sum(w for w, _ in calls[n:]))
-            cpus.append(sum(u for _, u in calls[n:]))
+            times.append(sum(w for w, _, _ in calls[n:]))
+            cpus.append(sum(u for _, u, _ in calls[n:]))
+            first.append(any(cold for _, _, cold in calls[n:]))
             r = c.sot.lastResult
-            first += [False] if k else []
             hits.append(r.budget_hit)
             its.append(r.iterations)
     pool.clear()
@@ -182,9 +190,7 @@ def torque(duration: float) -> dict[str, Any]:
     real = HierarchySolver.solve
 
     def timed(self, levels, damping=None):
-        sizes = tuple(len(level[0]) for level in levels)
-        buf = self._buf  # the 20x budget: no buffers, other sizes, or no warm start
-        first.append(buf is None or buf.sizes != sizes or not buf.warm)
+        first.append(_cold(self, tuple(len(level[0]) for level in levels)))
         t0, c0 = time.perf_counter(), time.thread_time()
         r = real(self, levels, damping)
         times.append((time.perf_counter() - t0) * 1e6)

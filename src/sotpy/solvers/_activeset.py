@@ -353,11 +353,9 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     # phase's target is x itself (the usual tick: the guess was right)
     at_ehqp = True
     lev0 = slice(starts[0], starts[1]) if p > 0 else slice(0, 0)
-    v0 = (
-        _violation(A[lev0], lo[lev0], up[lev0], anorm[lev0], eps, x)
-        if np.isfinite(xprev).all()
-        else 0.0
-    )
+    warm0 = p > 0 and bool(np.isfinite(xprev).all())
+    v0 = _violation(A[lev0], lo[lev0], up[lev0], anorm[lev0], eps, x) if warm0 else 0.0
+    met0 = warm0 and v0 == 0.0  # x meets level 0: its phase has no violated row to add
     if v0 > 0.0:
         # ... unless it violates level 0 more than the previous answer does once corrected
         # onto level 0's active rows (the smallest correction that meets them): then the
@@ -370,7 +368,9 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
         upto = 2 * j + 2 if j < p else 2 * p + 1  # the sub-levels phase j sees
         scope = ineq[level_of[ineq] <= min(j, p - 1)]  # the rows that may block
         released = -1
-        if j < p:  # level j's rows violated where the phase starts join its least squares
+        # level j's rows violated where the phase starts join its least squares (none when
+        # the start check above found level 0 met at this very point: no second scan)
+        if j < p and not (j == 0 and met0):
             mine = ineq[(level_of[ineq] == j) & ((status[ineq] == 0) | (attach[ineq] > j))]
             if len(mine):
                 v = A[mine] @ x

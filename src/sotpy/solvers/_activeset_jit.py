@@ -744,9 +744,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         # x is the recursion's point of the current active rows, nothing changed since:
         # every phase's target is x itself (the usual tick: the guess was right)
         at_ehqp = True
-        v0 = (
-            _violation(A, lo, up, anorm, eps, starts[0], starts[1], x, n) if warm and p > 0 else 0.0
-        )
+        warm = warm and p > 0
+        v0 = _violation(A, lo, up, anorm, eps, starts[0], starts[1], x, n) if warm else 0.0
+        met0 = warm and v0 == 0.0  # x meets level 0: its phase has no violated row to add
         if v0 > 0.0:
             # ... unless it violates level 0 more than the previous answer corrected onto
             # level 0's active rows: then the first phase starts there
@@ -761,7 +761,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             upto = 2 * j + 2 if j < p else ns
             jmax = min(j, p - 1)
             released = -1
-            if j < p:  # level j's rows violated where the phase starts join its least squares
+            # level j's rows violated where the phase starts join its least squares (none
+            # when the start check above found level 0 met at this very point)
+            if j < p and not (j == 0 and met0):
                 xi = 1.0
                 for col in range(n):
                     xi = max(xi, abs(x[col]))
