@@ -76,24 +76,23 @@ hierarchy, ticks of 75 to 104 iterations take 3 to 9). Then it repeats:
 
 1. ``x^+`` = the phase's target, ``d = x^+ - x``. The target moves ``x`` only in the
    directions of the phase's sub-levels (``Y_{2j}``, ``Y_{2j+1}``: ``held_j`` then
-   ``own_j``), to their least-squares values from ``x`` (damped: the damped least squares
-   of those coordinates, the others as ``x`` has them); the coordinates fixed above stay
-   as they are, those left below (``Z_{2j+2}``) are set to 0 when damped (the damping's
-   optimum is the recursion's point) and kept when not (the phase's optimal set is
-   flat there; a look-ahead through the sub-levels below picks the point to head
-   for). Phase ``p``'s target zeroes the coordinates left after ``held_p``. Taking the
-   recursion's whole point ``x_{2j+2}`` instead would also move the coordinates above
-   to their values *for the current active rows*, and a row that depends on the rows
-   above (met at ``x`` only because they are) could then block the step at ``tau = 0``
-   again and again: a cycle. With the coordinates above kept, such a row is met all
-   along the step and never blocks. The step ``x + tau d`` stops at the first inactive
-   row of the levels ``<= j`` (every level in phase ``p``) that reaches a bound (``tau <
-   1``); the row becomes active: in ``own_j`` if it is level ``j``'s, else held for
-   ``j``. Rows of lower levels play no part. The held rows of the phase that are not
-   met at the new point (the previous call's guesses, on their way to their bound) are
-   released, so that the held rows are always met constraints and a blocking row
-   independent of them; held rows that depend on the rows above them (the eHQP's rank
-   says so) leave too.
+   ``own_j``), to their least-squares values from ``x`` (damped: the damped least
+   squares of those coordinates, the others as ``x`` has them); the coordinates fixed
+   above stay as they are, those left below (``Z_{2j+2}``) are set to 0 when damped (the
+   damping's optimum is the recursion's point) and kept when not (the phase's optimal
+   set is flat there: the phases below choose within it). Phase ``p``'s target zeroes
+   the coordinates left after ``held_p``. Taking the recursion's whole point
+   ``x_{2j+2}`` instead would also move the coordinates above to their values *for the
+   current active rows*, and a row that depends on the rows above (met at ``x`` only
+   because they are) could then block the step at ``tau = 0`` again and again: a cycle.
+   With the coordinates above kept, such a row is met all along the step and never
+   blocks. The step ``x + tau d`` stops at the first inactive row of the levels ``<= j``
+   (every level in phase ``p``) that reaches a bound (``tau < 1``); the row becomes
+   active: in ``own_j`` if it is level ``j``'s, else held for ``j``. Rows of lower
+   levels play no part. The held rows of the phase that are not met at the new point
+   (the previous call's guesses, on their way to their bound) are released, so that the
+   held rows are always met constraints and a blocking row independent of them; held
+   rows that depend on the rows above them (the eHQP's rank says so) leave too.
 2. At ``x^+``: ``own_j``'s rows strictly inside their interval are released (their
    residual has the wrong sign). Then the multipliers of objective ``j`` judge the rows
    that are met (own rows of the levels above, held rows) and not yet decided: a wrong
@@ -112,8 +111,11 @@ ends at the budget and is reported as a budget stop.
 The budget
 ----------
 One iteration is one eHQP (the compiled twin restarts it at the first sub-level whose
-rows changed). The call stops after ``max_iter`` eHQP solves, or when the thread's CPU
-time would exceed ``budget`` with one more iteration of the largest cost seen so far.
+rows changed, and computes only the sub-levels down to ``own_j`` during phase ``j``: a
+phase reads nothing below; the next phase's first step completes them, which is not
+counted as an iteration since no row changed). The call stops after ``max_iter`` eHQP
+solves, or when the thread's CPU time would exceed ``budget`` with one more iteration of
+the largest cost seen so far.
 Stopped in phase ``j``: levels ``< j`` are optimal; a last step (one eHQP with the
 current active rows of every level; its target corrects the coordinates of the
 sub-levels from ``held_j`` down and keeps those above, and the step goes from the
@@ -319,7 +321,6 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     lam_sub = np.zeros(2 * p + 1)
     lam_sub[1::2] = lams
     ineq = np.flatnonzero(kind == INEQ)
-    undamped = not lams.any()
     move_tol = max(eps, 2.0 * rank_tol)
 
     def sub_of(i):
@@ -404,56 +405,46 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                 continue
             # the phase's target: level j's rows (held, then its own least squares, damped
             # towards where the levels above leave the point) fitted by the smallest
-            # correction of x; then the levels below likewise (they do not change level j,
-            # and the step heads for the whole answer); the last phase: the minimum-norm
-            # point
+            # correction of x; the last phase: the minimum-norm point
             if at_ehqp:
-                xj = xp = x
+                xj = x
             elif j < p:
                 if lam_sub[2 * j + 1]:  # damped: the recursion's point (the damping's optimum)
                     xj = _toward(A, t, e, 2 * j, 2 * j + 2, x, lam_sub)
                 else:
                     xj = _correct(A, t, e, 2 * j + 1, _correct(A, t, e, 2 * j, x))
-                xp = xj
-                if undamped:  # the levels below, looking ahead (see the module docstring)
-                    for s2 in range(2 * j + 2, 2 * p + 1):
-                        xp = _correct(A, t, e, s2, xp)
             else:
-                xj = xp = _toward(A, t, e, 2 * p, 2 * p + 1, x, lam_sub)
+                xj = _toward(A, t, e, 2 * p, 2 * p + 1, x, lam_sub)
             # the rows that may block: those of the levels <= j not active in the sub-levels
             # this phase sees (a row held for a phase below is free here)
             sub = 2 * attach[scope] + (attach[scope] == level_of[scope])
             cand = scope[(status[scope] == 0) | (sub >= upto)]
-            # level j's own step first (a row it meets is held for it), then the look-ahead
-            # (a row it meets is held for the level below)
+            # the step, up to the first of them that reaches a bound: held for this phase
             blocked = False
-            for target, hold in () if at_ehqp else ((xj, j), (xp, j + 1)):
-                tau, i, side = _ratio(A, x, target - x, cand, lo, up, anorm, move_tol)
+            if not at_ehqp:
+                tau, i, side = _ratio(A, x, xj - x, cand, lo, up, anorm, move_tol)
                 if i < 0:
-                    x = target
-                    continue
-                x = x + tau * (target - x)
-                if hold > j and status[i] != 0 and attach[i] == hold:
-                    break  # already held for the level below (a dependent row): no look-ahead
-                if i == released and tau == 0.0:
-                    locked[i] = True  # released and blocked at once: not again ...
+                    x = xj
                 else:
-                    locked[:] = False  # ... until something else changes
-                # held rows of that sub-level not met yet (guesses from the previous call, on
-                # their way to their bound) leave: the held rows must be met constraints for
-                # the next blocking row to be independent of them
-                held = ineq[(status[ineq] != 0) & (attach[ineq] == hold) & (level_of[ineq] < hold)]
-                if len(held):
-                    gap = np.abs(A[held] @ x - t[held])
-                    tol = eps * (1.0 + anorm[held] * max(1.0, float(np.abs(x).max())))
-                    status[held[gap > tol]] = 0
-                status[i] = side
-                attach[i] = hold
-                if TRACE is not None:
-                    TRACE.append(("block", j, i, tau, hold))
-                released = -1
-                stale = blocked = True
-                break
+                    x = x + tau * (xj - x)
+                    if i == released and tau == 0.0:
+                        locked[i] = True  # released and blocked at once: not again ...
+                    else:
+                        locked[:] = False  # ... until something else changes
+                    # held rows of the phase not met yet (guesses from the previous call, on
+                    # their way to their bound) leave: the held rows must be met constraints
+                    # for the next blocking row to be independent of them
+                    held = ineq[(status[ineq] != 0) & (attach[ineq] == j) & (level_of[ineq] < j)]
+                    if len(held):
+                        gap = np.abs(A[held] @ x - t[held])
+                        tol = eps * (1.0 + anorm[held] * max(1.0, float(np.abs(x).max())))
+                        status[held[gap > tol]] = 0
+                    status[i] = side
+                    attach[i] = j
+                    if TRACE is not None:
+                        TRACE.append(("block", j, i, tau, j))
+                    released = -1
+                    stale = blocked = True
             if blocked:
                 continue
             if j == p:

@@ -221,10 +221,13 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             u[s] = v / G[s, s]
 
     @kernel(fast=True)
-    def _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, k0, ws, nzp, nzi):  # pragma: no cover
+    def _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, k0, kend, ws, nzp,
+              nzi):  # pragma: no cover - compiled  # fmt: skip
         """The eHQP of the active rows ``act`` (sub-level ``s``: ``act[lstart[s]:lstart[s+1]]``)
-        from sub-level ``k0`` on (the sub-levels above, their basis rows and points kept from
-        the last call). ``xs[s]``: the point before sub-level ``s``; ``xs[ns]`` the last.
+        for sub-levels ``k0..kend-1`` (the sub-levels above, their basis rows and points kept
+        from the last call; those from ``kend`` on left for a later call that starts there:
+        a phase needs only its own and those above). ``xs[s]``: the point before sub-level
+        ``s``; ``xs[kend]`` the last.
         Rows with few nonzero entries (``nzp``/``nzi``: their columns) multiply the basis
         by those columns only. The last sub-level with rows applies its reflectors to the
         step only; the basis waits (``pend[0]``) until :func:`_complete` needs it, and the
@@ -257,10 +260,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 x[i] = 0.0
             cs[0] = 0
         changed = True  # the basis changed since the last save
-        for k in range(k0, ns):
+        for k in range(k0, kend + 1):
             c = cs[k]
             # the basis at the start of k, saved for a restart there: only when it changed
-            if ident:
+            if k == ns:
+                pass
+            elif ident:
                 sv[k] = -1
             elif changed or k == k0:
                 for i in range(c, n):
@@ -272,6 +277,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 sv[k] = sv[k - 1]
             for col in range(n):
                 xs[k, col] = x[col]
+            if k == kend:
+                break
             r0 = lstart[k]
             mk = lstart[k + 1] - r0
             f = n - c
@@ -334,8 +341,6 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         for col in range(n):
                             x[col] += uj * Yt[c + j, col]
             cs[k + 1] = c + r
-        for col in range(n):
-            xs[ns, col] = x[col]
 
     @kernel(fast=True)
     def _complete(ws, lstart, n):  # pragma: no cover - compiled
@@ -684,12 +689,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     nzi[q] = col
                     q += 1
         nzp[m] = q
-        undamped = True
         lam_sub = np.zeros(ns)
         for k in range(p):
             lam_sub[2 * k + 1] = lams[k]
-            if lams[k] != 0.0:
-                undamped = False
         move_tol = max(eps, 2.0 * rank_tol)
         # workspace
         act = np.empty(max(m, 1), dtype=np.int64)
@@ -719,7 +721,6 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         xs = ws[2]
         sub_ranks = ws[7]
         xj = np.zeros(n)
-        xp = np.zeros(n)
         tmp = np.zeros(n)
         d = np.zeros(n)
         rhs = np.empty(max(m, n))
@@ -736,8 +737,9 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         # the first phase starts at the eHQP point of the previous call's active rows
         _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
                 t, phis)  # fmt: skip
-        _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws, nzp, nzi)
+        _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ns, ws, nzp, nzi)
         its = 1
+        valid = ns  # the eHQP is computed for the sub-levels < valid
         for col in range(n):
             x[col] = xs[ns, col]
         stale = False
@@ -761,6 +763,11 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             upto = 2 * j + 2 if j < p else ns
             jmax = min(j, p - 1)
             released = -1
+            # the sub-levels of this phase that the last eHQP left: computed before its
+            # first step (not counted as an iteration: no row changed)
+            extend = valid < upto
+            if extend:
+                dirty = min(dirty, valid)
             # level j's rows violated where the phase starts join its least squares (none
             # when the start check above found level 0 met at this very point)
             if j < p and not (j == 0 and met0):
@@ -778,18 +785,20 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         dirty = min(dirty, 2 * j + 1)
                         stale = True
             while True:
-                if stale:
+                if stale or extend:
                     now = _cpu_time(clock)
-                    if its >= max_iter or now - start + longest > budget:
-                        reason = ITERATIONS if its >= max_iter else TIME
+                    if (stale and its >= max_iter) or now - start + longest > budget:
+                        reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
                     _gather(A, starts, kind, status, attach, level_of, lo, up, fro,
                                    dirty, act, slot, lstart, t, phis)  # fmt: skip
-                    _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, ws, nzp, nzi)
-                    its += 1
+                    _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, upto, ws, nzp, nzi)
+                    if stale:
+                        its += 1
+                        at_ehqp = False
                     longest = max(longest, _cpu_time(clock) - now)
-                    stale = False
-                    at_ehqp = False
+                    stale = extend = False
+                    valid = upto
                     dirty = ns
                 # held rows that depend on the rows above them leave
                 s = 2 * j
@@ -806,61 +815,44 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 if at_ehqp:
                     for col in range(n):
                         xj[col] = x[col]
-                        xp[col] = x[col]
                 elif j < p and lam_sub[2 * j + 1] != 0.0:  # damped: the recursion's point
                     _toward(A, t, act, lstart, 2 * j, 2 * j + 2, lam_sub, x, ws, xj, rhs, tmp)
-                    for col in range(n):
-                        xp[col] = xj[col]
                 elif j < p:
                     _correct(A, t, act, lstart, 2 * j, 0.0, x, ws, tmp, rhs)
                     _correct(A, t, act, lstart, 2 * j + 1, 0.0, tmp, ws, xj, rhs)
-                    for col in range(n):
-                        xp[col] = xj[col]
-                    if undamped:
-                        for s2 in range(2 * j + 2, ns):
-                            _correct(A, t, act, lstart, s2, 0.0, xp, ws, tmp, rhs)
-                            for col in range(n):
-                                xp[col] = tmp[col]
                 else:
                     _toward(A, t, act, lstart, ns - 1, ns, lam_sub, x, ws, xj, rhs, tmp)
+                # the step, up to the first row of the levels <= j that reaches a bound: held
+                # for this phase (in held_j, or own_j when it is level j's)
+                if not at_ehqp:
                     for col in range(n):
-                        xp[col] = xj[col]
-                blocked = False
-                for part in range(0 if at_ehqp else 2):
-                    hold = j + part
-                    for col in range(n):
-                        d[col] = (xj[col] if part == 0 else xp[col]) - x[col]
+                        d[col] = xj[col] - x[col]
                     tau, i, side = _ratio(A, x, d, kind, status, attach, level_of, lo, up,
                                           anorm, jmax, upto, move_tol)  # fmt: skip
                     for col in range(n):
                         x[col] += tau * d[col]
-                    if i < 0:
+                    if i >= 0:
+                        if i == released and tau == 0.0:
+                            locked[i] = True  # released and blocked at once: not again ...
+                        else:
+                            for q in range(m):
+                                locked[q] = False  # ... until something else changes
+                        xi = 1.0
+                        for col in range(n):
+                            xi = max(xi, abs(x[col]))
+                        for q in range(m):  # unmet held rows of the phase leave
+                            if status[q] != 0 and attach[q] == j and level_of[q] < j:
+                                tq = up[q] if status[q] > 0 else lo[q]
+                                if abs(_dot(A[q], x, n) - tq) > eps * (1.0 + anorm[q] * xi):
+                                    status[q] = 0
+                        status[i] = side
+                        attach[i] = j
+                        # the sub-levels above held_j keep their rows, whatever level the
+                        # row is of
+                        dirty = min(dirty, 2 * j)
+                        released = -1
+                        stale = True
                         continue
-                    if part == 1 and status[i] != 0 and attach[i] == hold:
-                        break  # already held for the level below (dependent): no look-ahead
-                    if i == released and tau == 0.0:
-                        locked[i] = True  # released and blocked at once: not again ...
-                    else:
-                        for q in range(m):
-                            locked[q] = False  # ... until something else changes
-                    xi = 1.0
-                    for col in range(n):
-                        xi = max(xi, abs(x[col]))
-                    for q in range(m):  # unmet held rows of that sub-level leave
-                        if status[q] != 0 and attach[q] == hold and level_of[q] < hold:
-                            tq = up[q] if status[q] > 0 else lo[q]
-                            if abs(_dot(A[q], x, n) - tq) > eps * (1.0 + anorm[q] * xi):
-                                status[q] = 0
-                    status[i] = side
-                    attach[i] = hold
-                    dirty = min(dirty, 2 * min(hold, level_of[i]))
-                    released = -1
-                    stale = True
-                    blocked = True
-                    break
-                if blocked:
-                    dirty = min(dirty, 2 * j)
-                    continue
                 if j < p:  # own_j's rows beyond the other bound flip, strictly inside leave
                     xi = 1.0
                     for col in range(n):
@@ -912,7 +904,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             # <= solved that it would leave
             _gather(A, starts, kind, status, attach, level_of, lo, up, fro, 0, act, slot, lstart,
                     t, phis)  # fmt: skip
-            _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ws, nzp, nzi)
+            _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, 0, ns, ws, nzp, nzi)
             its += 1
             _toward(A, t, act, lstart, 2 * solved, ns, lam_sub, x, ws, xj, rhs, tmp)
             for col in range(n):
