@@ -74,6 +74,23 @@ def test_both_twins_take_the_same_decisions(seed):
     np.testing.assert_allclose(a.x, b.x, atol=1e-8 * (1.0 + np.abs(a.x).max()))
 
 
+@pytest.mark.parametrize("seed", [72, 146, 244, 245])
+def test_held_rows_updated_in_place_give_the_refactored_answer(seed):
+    """The benchmark's largest stacks (n up to 40, a box first): dozens of box rows join
+    the held rows of a lower level one at a time, and the compiled twin updates that
+    factor in place (``_append_held``) where the NumPy twin refactors it with LAPACK.
+    Same decisions, same answer."""
+    if compiled is None:
+        pytest.skip("numba is not installed")
+    levels = adversarial_stack(np.random.default_rng(seed))
+    a = HierarchySolver(jit=False, time_budget=None, max_iter=1000).solve(levels)
+    b = HierarchySolver(jit=True, time_budget=None, max_iter=1000).solve(levels)
+    assert a.converged and b.converged and a.iterations >= 60
+    assert abs(a.iterations - b.iterations) <= 1
+    np.testing.assert_allclose(b.residuals, a.residuals, atol=1e-9 * _scale(a.residuals))
+    np.testing.assert_allclose(b.x, a.x, atol=1e-8 * (1.0 + np.abs(a.x).max()))
+
+
 @pytest.mark.parametrize("jit", JITS)
 @pytest.mark.parametrize("seed", range(6))
 def test_a_stack_of_other_sizes_starts_from_an_unrelated_answer(seed, jit):

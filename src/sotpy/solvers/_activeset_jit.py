@@ -445,6 +445,104 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 for col in range(n):
                     h[col] += v * a[col]
 
+    @kernel(fast=True)
+    def _append_held(A, t, act, slot, lstart, phis, rank_tol, s, row, ws):  # pragma: no cover
+        """Sub-level ``s`` (a ``held_j``, full rank) with row ``row`` appended, its factor
+        and the basis after it updated in place instead of refactored: the row's
+        coordinates in the old held directions are its new column of ``R``, one
+        Householder reflector folds its coordinates in the directions left into one new
+        direction, and that reflector alone moves the basis below. A blocking row is
+        independent of the held rows (the step does not move a row that depends on them),
+        so a pivoted refactorisation would keep every row too; the point after ``s`` moves
+        along the new direction only, to meet the row. Then sub-level ``s + 1`` restarts
+        from the saved basis and point. False (nothing that a restart at ``s`` reads is
+        touched) when the update does not apply: the held rows not of full rank, no
+        direction left, the basis after ``s`` not formed, or a rank decision that the
+        row's weight in the threshold could change."""
+        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, _, _, _, _, _, w, y, pend, sv = ws
+        n = A.shape[1]
+        ns = lstart.shape[0] - 1
+        if s + 1 >= ns or 0 <= pend[1] <= s:
+            return False
+        r0 = lstart[s]
+        mk = lstart[s + 1] - r0
+        r = ranks[s]
+        c = cs[s]
+        if r != mk or n - c - r < 1 or cs[s + 1] != c + r:
+            return False
+        a = A[row]
+        a2 = 0.0
+        for col in range(n):
+            a2 += a[col] * a[col]
+        phi = math.sqrt(phis[s] * phis[s] + a2)
+        thr = rank_tol * phi
+        for q in range(r):
+            if not abs(Mw[r0 + q, q]) > thr:
+                return False
+        # the basis after the old held rows (rows c+r..n-1), into Yt, and the row in it
+        src = sv[s + 1]
+        f = n - c - r
+        for i in range(c + r, n):
+            for col in range(n):
+                Yt[i, col] = Ysave[src, i, col] if src >= 0 else (1.0 if i == col else 0.0)
+        for q in range(f):
+            w[q] = _dot(a, Yt[c + r + q], n)
+        alpha = w[0]
+        xn2 = 0.0
+        for q in range(1, f):
+            xn2 += w[q] * w[q]
+        norm = math.sqrt(alpha * alpha + xn2)
+        if not norm > thr:
+            return False
+        m_new = r0 + mk  # the new row's slot: the held block's end (own_j's move down)
+        M = Mw[m_new]
+        for q in range(r):
+            M[q] = _dot(a, Yt[c + q], n)  # its coordinates in the held directions
+        if xn2 == 0.0:
+            tq = 0.0
+            M[r] = alpha
+        else:
+            beta = -math.copysign(norm, alpha)
+            tq = (beta - alpha) / beta
+            sc = 1.0 / (alpha - beta)
+            M[r] = beta
+            for q in range(1, f):
+                M[r + q] = w[q] * sc
+            # the reflector on the basis rows c+r..n-1
+            for col in range(n):
+                y[col] = Yt[c + r, col]
+            for q in range(1, f):
+                vq = M[r + q]
+                for col in range(n):
+                    y[col] += vq * Yt[c + r + q, col]
+            for col in range(n):
+                Yt[c + r, col] -= tq * y[col]
+            for q in range(1, f):
+                vq = tq * M[r + q]
+                for col in range(n):
+                    Yt[c + r + q, col] -= vq * y[col]
+        tau[s, r] = tq
+        piv[m_new] = r
+        ranks[s] = r + 1
+        phis[s] = phi
+        act[m_new] = row
+        slot[row] = m_new
+        lstart[s + 1] = m_new + 1
+        cs[s + 1] = c + r + 1
+        # the point after s: along the new direction, to the row's target (a . y = M[r])
+        xa = 0.0
+        for col in range(n):
+            xa += a[col] * xs[s + 1, col]
+        step = (t[row] - xa) / M[r]
+        for col in range(n):
+            xs[s + 1, col] += step * Yt[c + r, col]
+        # the basis at the start of s + 1, saved for the restart there
+        for i in range(c + r + 1, n):
+            for col in range(n):
+                Ysave[s + 1, i, col] = Yt[i, col]
+        sv[s + 1] = s + 1
+        return True
+
     @kernel
     def _gather(A, starts, kind, status, attach, level_of, lo, up, fro, k0, act, slot, lstart,
                 t, phis):  # pragma: no cover - compiled  # fmt: skip
@@ -759,6 +857,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     x[col] = xj[col]
                 at_ehqp = False
         dirty = ns  # the first sub-level whose rows changed since the last eHQP
+        append = -1  # a row to append to the held rows of the phase (see _append_held)
         for j in range(p + 1):
             upto = 2 * j + 2 if j < p else ns
             jmax = min(j, p - 1)
@@ -790,9 +889,15 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     if (stale and its >= max_iter) or now - start + longest > budget:
                         reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
+                    if append >= 0:  # its target (the gather below sets every row's)
+                        t[append] = up[append] if status[append] > 0 else lo[append]
+                    if append >= 0 and _append_held(A, t, act, slot, lstart, phis, rank_tol,
+                                                    2 * j, append, ws):  # fmt: skip
+                        dirty = 2 * j + 1
                     _gather(A, starts, kind, status, attach, level_of, lo, up, fro,
                                    dirty, act, slot, lstart, t, phis)  # fmt: skip
                     _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, upto, ws, nzp, nzi)
+                    append = -1
                     if stale:
                         its += 1
                         at_ehqp = False
@@ -840,11 +945,17 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         xi = 1.0
                         for col in range(n):
                             xi = max(xi, abs(x[col]))
+                        kept = True
                         for q in range(m):  # unmet held rows of the phase leave
                             if status[q] != 0 and attach[q] == j and level_of[q] < j:
                                 tq = up[q] if status[q] > 0 else lo[q]
                                 if abs(_dot(A[q], x, n) - tq) > eps * (1.0 + anorm[q] * xi):
                                     status[q] = 0
+                                    kept = False
+                        # the only change since the last eHQP: a row of a level above joins
+                        # held_j, whose factor can then be updated (see _append_held)
+                        if kept and dirty == ns and level_of[i] < j:
+                            append = i
                         status[i] = side
                         attach[i] = j
                         # the sub-levels above held_j keep their rows, whatever level the
