@@ -341,6 +341,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     decided = np.zeros(m, dtype=bool)
     locked = np.zeros(m, dtype=bool)
     longest = 0.0
+    checked = None  # when the budget was last checked
     reason = OPTIMAL
     solved = p + 1
     # the first phase starts where the previous call's active rows lead: their eHQP point
@@ -383,14 +384,18 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                 stale = stale or bool(out.any())
         while True:
             if stale:
-                if its >= max_iter or time.thread_time() - start + longest > budget:
+                # an iteration is all the work from one check to the next (the eHQP, the
+                # target, the step, the verdict): the longest so far predicts the next
+                now = time.thread_time()
+                if checked is not None:
+                    longest = max(longest, now - checked)
+                checked = now
+                if its >= max_iter or now - start + longest > budget:
                     reason = ITERATIONS if its >= max_iter else TIME
                     break
-                began = time.thread_time()
                 subrows, phis, t = build()
                 e = _ehqp(A, t, subrows, lam_sub, phis, rank_tol, 2 * p + 1)
                 its += 1
-                longest = max(longest, time.thread_time() - began)
                 stale = at_ehqp = False
             # held rows that depend on the rows above them (a guess from the previous call
             # that no longer fits, a degenerate vertex) leave: held rows are constraints the

@@ -830,6 +830,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         decided = np.zeros(max(m, 1), dtype=np.bool_)
         locked = np.zeros(max(m, 1), dtype=np.bool_)
         longest = 0.0
+        checked = -1.0  # when the budget was last checked
         reason = OPTIMAL
         solved = p + 1
         # the first phase starts at the eHQP point of the previous call's active rows
@@ -885,7 +886,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         stale = True
             while True:
                 if stale or extend:
+                    # an iteration is all the work from one check to the next (the eHQP,
+                    # the target, the step, the verdict): the longest predicts the next
                     now = _cpu_time(clock)
+                    if checked >= 0.0:
+                        longest = max(longest, now - checked)
+                    checked = now
                     if (stale and its >= max_iter) or now - start + longest > budget:
                         reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
@@ -901,7 +907,6 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     if stale:
                         its += 1
                         at_ehqp = False
-                    longest = max(longest, _cpu_time(clock) - now)
                     stale = extend = False
                     valid = upto
                     dirty = ns
