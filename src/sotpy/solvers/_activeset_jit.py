@@ -10,8 +10,11 @@ dozen of them; compiled, one iteration on the Talos stand-and-reach stack costs 
   dot product of contiguous rows, and the pivoted QR of ``M^T`` works on the rows of
   ``M`` (LAPACK's column storage, transposed; the column norms recomputed at each step,
   small sizes);
-* an iteration restarts the recursion at the first level whose active set changed (the
-  levels above, their basis rows and point are kept);
+* an iteration restarts the recursion at the first sub-level whose active rows changed
+  (the sub-levels above, their basis rows and point are kept) and runs it only down to
+  the phase's own level (the next phase completes it);
+* a row that joins the phase's held rows, when nothing else changed, updates their
+  factor in place (:func:`_append_held`) instead of refactoring them;
 * the budget is read from ``clock_gettime(CLOCK_THREAD_CPUTIME_ID)`` (libc, reached through
   its address as an external symbol), the same clock as :func:`time.thread_time`.
 
