@@ -95,6 +95,25 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             y[j] -= d * V[s, j]
 
     @kernel(fast=True)
+    def _house(v, s, w):  # pragma: no cover - compiled
+        """The Householder reflector ``I - t u u^T`` that maps ``v[s:w]`` to ``(beta, 0,
+        ...)``: ``v[s]`` becomes ``beta`` (``|beta| = ||v[s:w]||``), ``v[s+1:w]`` the
+        vector ``u`` after its unit entry; returns ``t`` (0 when ``v[s+1:w]`` is already
+        0: ``v[s]`` is then kept)."""
+        alpha = v[s]
+        xn2 = 0.0
+        for i in range(s + 1, w):
+            xn2 += v[i] * v[i]
+        if xn2 == 0.0:
+            return 0.0
+        beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
+        scale = 1.0 / (alpha - beta)
+        for i in range(s + 1, w):
+            v[i] *= scale
+        v[s] = beta
+        return (beta - alpha) / beta
+
+    @kernel(fast=True)
     def _pivoted_qr(M, mk, f, tau, piv):  # pragma: no cover - compiled
         """Householder QR with column pivoting of ``M^T`` (``f x mk``) on the rows of
         ``M``: row ``s`` ends holding ``R[:s+1, s]`` then reflector ``s`` (unit entry
@@ -121,20 +140,10 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 tp = piv[s]
                 piv[s] = piv[best]
                 piv[best] = tp
-            alpha = M[s, s]
-            xn2 = 0.0
-            for i in range(s + 1, f):
-                xn2 += M[s, i] * M[s, i]
-            if xn2 == 0.0:
-                tau[s] = 0.0
-                continue
-            beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
-            t = (beta - alpha) / beta
+            t = _house(M[s], s, f)
             tau[s] = t
-            scale = 1.0 / (alpha - beta)
-            for i in range(s + 1, f):
-                M[s, i] *= scale
-            M[s, s] = beta
+            if t == 0.0:
+                continue
             for j in range(s + 1, mk):
                 w = M[j, s]
                 for i in range(s + 1, f):
@@ -146,24 +155,29 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         return kmin
 
     @kernel(fast=True)
+    def _reflect_rows(v, s, t, f, Yt, c, n, w):  # pragma: no cover - compiled
+        """Rows ``c+s..c+f-1`` of ``Yt`` (basis directions) <- ``H`` times them, ``H = I -
+        t u u^T``, ``u = (1, v[s+1:f])``."""
+        if t == 0.0:
+            return
+        for col in range(n):
+            w[col] = Yt[c + s, col]
+        for i in range(s + 1, f):
+            vi = v[i]
+            for col in range(n):
+                w[col] += vi * Yt[c + i, col]
+        for col in range(n):
+            Yt[c + s, col] -= t * w[col]
+        for i in range(s + 1, f):
+            vi = t * v[i]
+            for col in range(n):
+                Yt[c + i, col] -= vi * w[col]
+
+    @kernel(fast=True)
     def _reflect_basis(M, tau, r, f, Yt, c, n, w):  # pragma: no cover - compiled
         """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``."""
         for s in range(r):
-            t = tau[s]
-            if t == 0.0:
-                continue
-            for col in range(n):
-                w[col] = Yt[c + s, col]
-            for i in range(s + 1, f):
-                vi = M[s, i]
-                for col in range(n):
-                    w[col] += vi * Yt[c + i, col]
-            for col in range(n):
-                Yt[c + s, col] -= t * w[col]
-            for i in range(s + 1, f):
-                vi = t * M[s, i]
-                for col in range(n):
-                    Yt[c + i, col] -= vi * w[col]
+            _reflect_rows(M[s], s, tau[s], f, Yt, c, n, w)
 
     @kernel(fast=True)
     def _forward(M, r, rhs, u):  # pragma: no cover - compiled
@@ -188,20 +202,10 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 G[i, j] = M[j, i]
             G[i, mk + i] = lam
         for s in range(r):
-            alpha = G[s, s]
-            xn2 = 0.0
-            for j in range(s + 1, w):
-                xn2 += G[s, j] * G[s, j]
-            if xn2 == 0.0:
-                gt[s] = 0.0
-                continue
-            beta = -math.copysign(math.sqrt(alpha * alpha + xn2), alpha)
-            t = (beta - alpha) / beta
+            t = _house(G[s], s, w)
             gt[s] = t
-            sc = 1.0 / (alpha - beta)
-            for j in range(s + 1, w):
-                G[s, j] *= sc
-            G[s, s] = beta
+            if t == 0.0:
+                continue
             for q in range(s + 1, r):
                 _reflect(G, s, t, G[q], w)
 
@@ -266,18 +270,17 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         for k in range(k0, kend + 1):
             c = cs[k]
             # the basis at the start of k, saved for a restart there: only when it changed
-            if k == ns:
-                pass
-            elif ident:
-                sv[k] = -1
-            elif changed or k == k0:
-                for i in range(c, n):
-                    for col in range(n):
-                        Ysave[k, i, col] = Yt[i, col]
-                sv[k] = k
-                changed = False
-            else:
-                sv[k] = sv[k - 1]
+            if k < ns:
+                if ident:
+                    sv[k] = -1
+                elif changed or k == k0:
+                    for i in range(c, n):
+                        for col in range(n):
+                            Ysave[k, i, col] = Yt[i, col]
+                    sv[k] = k
+                    changed = False
+                else:
+                    sv[k] = sv[k - 1]
             for col in range(n):
                 xs[k, col] = x[col]
             if k == kend:
@@ -462,7 +465,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         touched) when the update does not apply: the held rows not of full rank, no
         direction left, the basis after ``s`` not formed, or a rank decision that the
         row's weight in the threshold could change."""
-        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, _, _, _, _, _, w, y, pend, sv = ws
+        Yt, Ysave, xs, cs, Mw, piv, tau, ranks, _, _, _, _, _, _, y, pend, sv = ws
         n = A.shape[1]
         ns = lstart.shape[0] - 1
         if s + 1 >= ns or 0 <= pend[1] <= s:
@@ -488,42 +491,16 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         for i in range(c + r, n):
             for col in range(n):
                 Yt[i, col] = Ysave[src, i, col] if src >= 0 else (1.0 if i == col else 0.0)
-        for q in range(f):
-            w[q] = _dot(a, Yt[c + r + q], n)
-        alpha = w[0]
-        xn2 = 0.0
-        for q in range(1, f):
-            xn2 += w[q] * w[q]
-        norm = math.sqrt(alpha * alpha + xn2)
-        if not norm > thr:
-            return False
         m_new = r0 + mk  # the new row's slot: the held block's end (own_j's move down)
         M = Mw[m_new]
+        for q in range(f):  # its coordinates in the directions left, folded into one
+            M[r + q] = _dot(a, Yt[c + r + q], n)
+        tq = _house(M, r, r + f)
+        if not abs(M[r]) > thr:
+            return False
         for q in range(r):
             M[q] = _dot(a, Yt[c + q], n)  # its coordinates in the held directions
-        if xn2 == 0.0:
-            tq = 0.0
-            M[r] = alpha
-        else:
-            beta = -math.copysign(norm, alpha)
-            tq = (beta - alpha) / beta
-            sc = 1.0 / (alpha - beta)
-            M[r] = beta
-            for q in range(1, f):
-                M[r + q] = w[q] * sc
-            # the reflector on the basis rows c+r..n-1
-            for col in range(n):
-                y[col] = Yt[c + r, col]
-            for q in range(1, f):
-                vq = M[r + q]
-                for col in range(n):
-                    y[col] += vq * Yt[c + r + q, col]
-            for col in range(n):
-                Yt[c + r, col] -= tq * y[col]
-            for q in range(1, f):
-                vq = tq * M[r + q]
-                for col in range(n):
-                    Yt[c + r + q, col] -= vq * y[col]
+        _reflect_rows(M, r, tq, r + f, Yt, c, n, y)
         tau[s, r] = tq
         piv[m_new] = r
         ranks[s] = r + 1
