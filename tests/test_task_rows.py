@@ -612,3 +612,65 @@ def test_writers_raise_buffer_full_when_the_rows_do_not_fit(humanoid, continuous
         A, b = np.full((r + k, nv), np.nan), np.full(r + k, np.nan)  # exactly enough
         assert w.write(values_of(w), 0, A, b, r, 1.0) == k, entity.name
         assert np.isfinite(A[r:]).all() and np.isnan(A[:r]).all()
+
+
+# -- the inequality task's bounds ------------------------------------------------------
+def _references(rng: np.random.Generator, m: int, case: str) -> tuple[np.ndarray, np.ndarray]:
+    """(referenceInf, referenceSup) for ``case``: both, one side only, infinite entries,
+    or one of the inputs the task's callback refuses."""
+    lo = rng.uniform(-1.0, 0.5, m)
+    up = lo + rng.uniform(0.0, 1.0, m)
+    if case == "lower only":
+        up = np.zeros(0)
+    elif case == "upper only":
+        lo = np.zeros(0)
+    elif case == "infinite entries":
+        lo[::3], up[1::3] = -np.inf, np.inf
+    elif case == "lower above upper":
+        lo[m // 2] = up[m // 2] + 0.1
+    elif case == "lower +inf":
+        lo[1] = np.inf
+    elif case == "upper -inf":
+        up[2] = -np.inf
+    elif case == "wrong size":
+        up = up[:-1]
+    elif case == "overflow":
+        lo[0] = 1e308
+    return lo, up
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["both", "lower only", "upper only", "infinite entries", "lower above upper",
+     "lower +inf", "upper -inf", "wrong size", "overflow"],
+)  # fmt: skip
+def test_inequality_bounds_kernel_matches_the_task_callback(case):
+    """``inequality_bounds`` (the bounds of TaskInequality's writer) against the task's
+    own ``_bounds`` callback: the same bounds where the callback accepts the references
+    (to rounding: the writer adds ``c ref`` to the features' ``-c e``, the callback
+    computes ``c (ref - e)``), -1 where it raises."""
+    from sotpy.errors import SotpyError
+    from sotpy.tasks import TaskInequality
+
+    rng = np.random.default_rng(abs(hash(case)) % 2**32)
+    task = TaskInequality("ineq_" + case.replace(" ", "_"))
+    m, r, k, dt = 7, 3, 0.7, 1e-3
+    c = k / dt
+    e = rng.standard_normal(m) * (1e306 if case == "overflow" else 1.0)
+    rinf, rsup = _references(rng, m, case)
+    lo = np.full(m + 5, np.nan)
+    up = np.full(m + 5, np.nan)
+    lo[r : r + m] = -c * e  # what the features' rows leave there
+    got = rk.inequality_bounds(rinf, rsup, c, lo, up, r, m)
+    try:
+        want = task._bounds(rinf, rsup, k, dt, e)
+    except SotpyError:
+        want = None
+    if want is None:  # "overflow": a finite reference whose bound is not finite
+        assert got == -1
+        return
+    assert got == m
+    assert np.isnan(lo[:r]).all() and np.isnan(up[r + m :]).all()  # only its rows
+    for got_bound, want_bound in ((lo[r : r + m], want[0]), (up[r : r + m], want[1])):
+        np.testing.assert_array_equal(np.isfinite(got_bound), np.isfinite(want_bound))
+        np.testing.assert_allclose(got_bound, want_bound, rtol=1e-13, atol=0.0)

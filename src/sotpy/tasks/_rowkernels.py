@@ -162,12 +162,49 @@ def _limit_bounds(q, iq, ql, qu, vm, dt, lo, up, r):  # pragma: no cover - compi
         up[r + i] = b
 
 
+def _inequality_bounds(rinf, rsup, c, lo, up, r, m):  # pragma: no cover - compiled
+    """TaskInequality's bounds from its references, in place: on entry ``lo[r:r + m]``
+    holds ``-c e`` (the features' rows), on exit ``lo = -c e + c referenceInf`` and
+    ``up = -c e + c referenceSup`` (``-inf``/``+inf`` where a reference is empty), the
+    operations of :meth:`TaskInequality._bounds`. Returns ``m``, or -1 (the task's
+    callbacks then say what is wrong) when a reference's size is neither 0 nor ``m``,
+    a lower reference is ``+inf`` or an upper one ``-inf``, ``referenceInf >
+    referenceSup``, or a finite reference gives a bound that is not finite (an
+    overflow). On -1 the bounds written so far are not to be used."""
+    ni, ns = rinf.shape[0], rsup.shape[0]
+    if (ni != 0 and ni != m) or (ns != 0 and ns != m):
+        return -1
+    for i in range(m):
+        b = lo[r + i]
+        lower, upper = -math.inf, math.inf
+        if ni:
+            ri = rinf[i]
+            if not ri < math.inf:
+                return -1
+            lower = ri * c + b
+            if math.isfinite(ri) != math.isfinite(lower):
+                return -1
+        if ns:
+            si = rsup[i]
+            if not si > -math.inf:
+                return -1
+            if ni and rinf[i] > si:
+                return -1
+            upper = si * c + b
+            if math.isfinite(si) != math.isfinite(upper):
+                return -1
+        lo[r + i] = lower
+        up[r + i] = upper
+    return m
+
+
 _log3_c = kernel(_log3)
 _jlog3_c = kernel(_jlog3)
 pose_rows = kernel(_pose_rows)
 generic_rows = kernel(_generic_rows)
 posture_rows = kernel(_posture_rows)
 limit_bounds = kernel(_limit_bounds)
+inequality_bounds = kernel(_inequality_bounds)
 _warm: list[bool] = []
 
 
@@ -222,6 +259,15 @@ def warm_up() -> None:
     log3(np.eye(3))
     jlog3(np.eye(3))
     limit_bounds(s, rows[:1], s, s, s, 1.0, b, b, 0)
-    for k in (pose_rows, generic_rows, posture_rows, limit_bounds, _log3_c, _jlog3_c):
+    inequality_bounds(s, s[:0], 1.0, b, b, 0, 3)
+    for k in (
+        pose_rows,
+        generic_rows,
+        posture_rows,
+        limit_bounds,
+        inequality_bounds,
+        _log3_c,
+        _jlog3_c,
+    ):
         k.disable_compile()
     _warm.append(True)

@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import CommandError, EntityError, SignalTypeError, SotpyError
 from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, pool
 from ..graph.signal import Signal
+from . import _rowkernels
 from .features import FLAGS, FeatureAbstract, Flags
 from .rows import RowWriter, computedByOwnCallback
 
@@ -461,6 +462,8 @@ class TaskInequality(TaskAbstract):
             or not computedByOwnCallback(self.upper, TaskInequality.upper.fn)
         ):
             return None
+        if _rowkernels.inequality_bounds is None:  # no numba: the signals
+            return None
         found = _featureWriters(self._features)
         if found is None:
             return None
@@ -470,7 +473,9 @@ class TaskInequality(TaskAbstract):
             *sources,
         ]  # fmt: skip
         isfinite = math.isfinite
-        inf_, ninf = math.inf, -math.inf
+        inf_ = math.inf
+        bounds = _rowkernels.inequality_bounds
+        ndarray, f64 = np.ndarray, np.dtype(np.float64)
 
         def write(v: Any, o: int, A: np.ndarray, lo: np.ndarray, up: np.ndarray, r: int) -> int:
             selec, rinf, rsup, k, dt = v[o : o + 5]
@@ -481,39 +486,19 @@ class TaskInequality(TaskAbstract):
             c = k / dt
             if not isfinite(c):
                 return -1
+            for ref in (rinf, rsup):
+                if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype != f64:
+                    return -1
             r0 = r
             r = _writeFeatureRows(parts, v, o + 5, A, lo, r, c)  # J and -c e
             if r < 0:
                 return -1
-            m = r - r0
-            b = lo[r0:r]
-            for ref in (rinf, rsup):
-                if type(ref) is not np.ndarray or ref.shape[0] not in (0, m):
-                    return -1
-            if (rinf.shape[0] and not (rinf < inf_).all()) or (
-                rsup.shape[0] and not (rsup > ninf).all()
-            ):
+            # lo, up = -c e + c (referenceInf, referenceSup), the references checked
+            if bounds(rinf, rsup, c, lo, up, r0, r - r0) < 0:
                 return -1
-            if rinf.shape[0] and rsup.shape[0] and (rinf > rsup).any():
-                return -1
-            u = up[r0:r]
-            if rsup.shape[0]:
-                np.multiply(rsup, c, out=u)
-                u += b
-            else:
-                u.fill(inf_)
-            if rinf.shape[0]:
-                t = rinf * c
-                np.add(t, b, out=b)
-            else:
-                b.fill(ninf)
-            # a finite reference gives a finite bound (else the callback refuses it)
-            for ref, out in ((rinf, b), (rsup, u)):
-                if ref.shape[0] and not np.array_equal(np.isfinite(ref), np.isfinite(out)):
-                    return -1
             if not _selectColumns(selec, A, r0, r):
                 return -1
-            return m
+            return r - r0
 
         return RowWriter(sources, write)
 
