@@ -193,14 +193,18 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
     def _ls_factor(M, mk, r, lam, G, gt):  # pragma: no cover - compiled
         """Householder QR of ``[B^T; lam I]`` (``(mk + r) x r``, ``B^T[j, i] = M[j, i]``,
         ``i <= j``, full column rank) on the rows of ``G`` (row ``i``: column ``i``; the
-        reflector after the diagonal, its factor in ``gt[i]``)."""
-        w = mk + r
+        reflector after the diagonal, its factor in ``gt[i]``). Undamped, the rows of
+        ``lam I`` are zero and left out: the factor has ``mk`` rows, which ``gt[-1]``
+        keeps for :func:`_ls_apply` (``r <= n``: that entry is never a factor)."""
+        w = mk + r if lam != 0.0 else mk
+        gt[gt.shape[0] - 1] = w
         for i in range(r):
             for j in range(w):
                 G[i, j] = 0.0
             for j in range(i, mk):
                 G[i, j] = M[j, i]
-            G[i, mk + i] = lam
+            if w > mk:
+                G[i, mk + i] = lam
         for s in range(r):
             t = _house(G[s], s, w)
             gt[s] = t
@@ -213,7 +217,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
     def _ls_apply(G, gt, mk, r, rhs, u, y):  # pragma: no cover - compiled
         """``u = argmin ||[B^T; lam I] u - [rhs; 0]||`` with the factor of
         :func:`_ls_factor`: ``Q^T`` applied to the right-hand side, then ``R u = y``."""
-        w = mk + r
+        w = int(gt[gt.shape[0] - 1])  # the factor's rows: mk + r damped, mk undamped
         for j in range(mk):
             y[j] = rhs[j]
         for j in range(mk, w):
