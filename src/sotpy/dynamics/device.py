@@ -143,7 +143,7 @@ from ..errors import (
     SotpyError,
     SotpyWarning,
 )
-from ..graph import VECTOR, Entity, Input, Output, PeriodicCall, Plan, command
+from ..graph import VECTOR, Entity, Input, Output, OutputSignal, PeriodicCall, Plan, command
 from ..graph.pool import pool
 from .contact import Floor, FloorSimulator, FootPatch, PatchPoint
 
@@ -803,8 +803,7 @@ class Device(Entity):
         self._timeStep = dt
         if forces is not None:
             self._contactForces = forces
-        self.state.write(q_next, t + 1)
-        self.velocity.write(v_next, t + 1)
+        OutputSignal.writeMany(((self.state, q_next), (self.velocity, v_next)), t + 1)
         if events:
             self._report(events, t)
         self.after.run(t + 1)

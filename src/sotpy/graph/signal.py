@@ -388,6 +388,25 @@ class OutputSignal(Signal):
         else:
             _invalidate_dependants(self)
 
+    @staticmethod
+    def writeMany(values: Iterable[tuple[OutputSignal, Any]], t: int) -> None:
+        """:meth:`write` of several ``(signal, value)`` pairs at the same tick ``t`` (a
+        device's state and velocity): as many writes in a row, with one look at the
+        clock. When ``t`` is after the clock, nothing was evaluated at ``t`` yet and
+        the dependants see the new stamps; otherwise each signal's dependants are
+        invalidated at once."""
+        ahead = t > pool.time
+        written = []
+        for sig, v in values:
+            sig._value = v
+            sig._time = sig._checked = t
+            written.append(sig)
+        if ahead:
+            pool.time = t
+        else:
+            for sig in written:
+                _invalidate_dependants(sig)
+
     def _update(self, t: int) -> None:
         """Recompute at ``t`` if outdated (dependencies already brought to ``t``)."""
         tm = self._time

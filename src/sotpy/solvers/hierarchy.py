@@ -121,6 +121,7 @@ class HierarchyResult:
         "_fro",
         "_starts",
         "_status",
+        "_xnorm",
         "iterations",
         "method",
         "ranks",
@@ -128,7 +129,6 @@ class HierarchyResult:
         "solved",
         "status",
         "x",
-        "xnorm",
     )
 
     def __init__(self, x, residuals, ranks, status, solved, iterations, active, method, fro, eps):
@@ -141,9 +141,17 @@ class HierarchyResult:
         self._status, self._starts = active  # the statuses: `active` is made when read
         self._active = None
         self.method = method
-        self.xnorm = math.sqrt(float(x @ x))
+        self._xnorm = -1.0  # computed when first read
         self._fro = fro
         self._eps = eps
+
+    @property
+    def xnorm(self) -> float:
+        """``||x||`` (the units of ``x``)."""
+        if self._xnorm < 0.0:
+            x = self.x
+            self._xnorm = math.sqrt(float(x @ x))
+        return self._xnorm
 
     @property
     def active(self) -> tuple[np.ndarray, ...]:
@@ -204,7 +212,8 @@ class HierarchyResult:
         """Whether the first (hard) level is satisfied."""
         if not len(self.residuals):
             return True
-        return bool(self.residuals[0] <= 10.0 * self._eps * (1.0 + self._fro[0] * self.xnorm))
+        r0 = float(self.residuals[0])
+        return r0 == 0.0 or r0 <= 10.0 * self._eps * (1.0 + float(self._fro[0]) * self.xnorm)
 
     @property
     def all_satisfied(self) -> bool:
@@ -224,8 +233,8 @@ class _Buffers:
     (the warm start) and the kernel's outputs."""
 
     __slots__ = (
-        "A", "attach", "fro", "info", "lo", "ranks", "res", "sizes", "starts", "status", "up",
-        "warm", "wf", "wi", "x",
+        "A", "attach", "fro", "info", "lo", "ranks", "res", "sizes", "starts", "startsList",
+        "status", "up", "warm", "wf", "wi", "x",
     )  # fmt: skip
 
     def __init__(self, sizes: tuple[int, ...], n: int) -> None:
@@ -233,6 +242,7 @@ class _Buffers:
         starts = np.zeros(len(sizes) + 1, dtype=np.int64)
         np.cumsum(sizes, out=starts[1:])
         self.starts = starts
+        self.startsList = [int(s) for s in starts]  # handed out by stacked()
         m = int(starts[-1])
         self.A = np.zeros((m, n))
         self.lo = np.zeros(m)
@@ -390,7 +400,8 @@ class HierarchySolver:
 
         Returns ``(A, lower, upper, starts)``: ``A`` an ``m x n`` array (``m =
         sum(sizes)``), ``lower`` and ``upper`` of length ``m``; level ``k`` is rows
-        ``starts[k]:starts[k + 1]``. Write every row, then call :meth:`solve_stacked`.
+        ``starts[k]:starts[k + 1]`` (``starts`` is the solver's own list: read it, do not
+        change it). Write every row, then call :meth:`solve_stacked`.
         The buffers stay valid until a call with other sizes (by :meth:`solve` or
         :meth:`stacked`). Needs ``n`` (given to the constructor or taken from a solve).
         """
@@ -405,7 +416,7 @@ class HierarchySolver:
             if any(m < 0 for m in sizes):
                 raise SolverError(f"HierarchySolver.stacked: negative level size in {sizes}")
             buf = self._buf = self._resized(sizes, self.n)
-        return buf.A, buf.lo, buf.up, [int(s) for s in buf.starts]
+        return buf.A, buf.lo, buf.up, buf.startsList
 
     def solve_stacked(self, damping=None, *, equality: bool = False) -> HierarchyResult:
         """Solve the stack written into the buffers of :meth:`stacked`: the same
