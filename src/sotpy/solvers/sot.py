@@ -40,8 +40,9 @@ satisfied still gives the least-violating control, and the SOT says so with a
 joint-limit level itself is always feasible: its bounds are clipped so that
 ``lower <= upper``.)
 
-In a running loop (a compiled plan) the SOT reads each equality task from its features'
-inputs and writes ``J`` and ``-lambda e`` straight into the rows it hands to the solver
+In a running loop (a compiled plan) the SOT reads each task from its features' inputs
+and writes ``J`` and ``-lambda e`` (a ``TaskInequality``: ``J`` and both bounds) straight
+into the rows it hands to the solver
 (:mod:`sotpy.tasks.rows`), instead of one plan step per feature and task signal; the
 dependencies of ``control``, the task signals and the control are unchanged.
 ``setTaskFusion(False)`` reads every task through its signals.
