@@ -42,7 +42,9 @@ class GainAdaptive(Entity):
         """a exp(-b |e|) + c (1/s)."""
         if not e or self._b == 0.0:  # a constant (which does not read the error)
             return self._a + self._c
-        return self._a * math.exp(-self._b * float(np.linalg.norm(e[0]))) + self._c
+        v = e[0]
+        norm = math.sqrt(float(v.dot(v)))  # |e| (inf past 1e154: the gain is then c either way)
+        return self._a * math.exp(-self._b * norm) + self._c
 
     def __init__(self, name: str, *parameters: float) -> None:
         self._a, self._b, self._c = 0.0, 0.0, 0.1
