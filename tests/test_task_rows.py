@@ -675,3 +675,39 @@ def test_inequality_bounds_kernel_matches_the_task_callback(case):
     for got_bound, want_bound in ((lo[r : r + m], want[0]), (up[r : r + m], want[1])):
         np.testing.assert_array_equal(np.isfinite(got_bound), np.isfinite(want_bound))
         np.testing.assert_allclose(got_bound, want_bound, rtol=1e-13, atol=0.0)
+
+
+def test_inequality_bounds_accept_strided_references():
+    """A reference handed out as a strided view (a user's entity slicing a vector): the
+    fused write gives the bounds the task's callback gives, with no fallback."""
+    from sotpy.graph import VECTOR, Entity, Output
+    from sotpy.tasks import TaskInequality
+
+    class Halves(Entity):
+        className = "Halves"
+
+        @Output(VECTOR, deps=())
+        def every_other(self) -> np.ndarray:
+            return self._buf[::2]  # 4 entries, stride 16 bytes
+
+        def __init__(self, name: str) -> None:
+            self._buf = np.arange(8.0) - 10.0
+
+    src = Halves("halves")
+    fg = FeatureGeneric("strided_fg")
+    fg.errorIN.value = np.array([0.1, -0.2, 0.3, 0.0])
+    fg.jacobianIN.value = np.arange(4 * NV, dtype=float).reshape(4, NV)
+    task = TaskInequality("strided_ineq")
+    task.add(fg)
+    plug(src.every_other, task.referenceInf)
+    task.dt.value = 1e-3
+    writer = task._rowWriter()
+    assert writer is not None
+    values = tuple(s._holder().value for s in writer.sources)
+    assert not values[1].flags.c_contiguous  # referenceInf, strided
+    A = np.full((6, NV), np.nan)
+    lo, up = np.full(6, np.nan), np.full(6, np.nan)
+    assert writer.write(values, 0, A, lo, up, 1) == 4
+    np.testing.assert_allclose(lo[1:5], task.lower.value, rtol=1e-13)
+    np.testing.assert_array_equal(up[1:5], task.upper.value)  # +inf: no referenceSup
+    np.testing.assert_array_equal(A[1:5], task.jacobian.value)

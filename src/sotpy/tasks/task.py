@@ -489,6 +489,11 @@ class TaskInequality(TaskAbstract):
             for ref in (rinf, rsup):
                 if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype != f64:
                     return -1
+            # the kernel takes contiguous vectors (a source may hand out a strided view)
+            if not rinf.flags.c_contiguous:
+                rinf = np.ascontiguousarray(rinf)
+            if not rsup.flags.c_contiguous:
+                rsup = np.ascontiguousarray(rsup)
             r0 = r
             r = _writeFeatureRows(parts, v, o + 5, A, lo, r, c)  # J and -c e
             if r < 0:
