@@ -395,16 +395,14 @@ class OutputSignal(Signal):
         clock. When ``t`` is after the clock, nothing was evaluated at ``t`` yet and
         the dependants see the new stamps; otherwise each signal's dependants are
         invalidated at once."""
-        ahead = t > pool.time
-        written = []
-        for sig, v in values:
+        pairs = tuple(values)
+        for sig, v in pairs:
             sig._value = v
             sig._time = sig._checked = t
-            written.append(sig)
-        if ahead:
+        if t > pool.time:
             pool.time = t
         else:
-            for sig in written:
+            for sig, _ in pairs:
                 _invalidate_dependants(sig)
 
     def _update(self, t: int) -> None:

@@ -879,11 +879,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     if (stale and its >= max_iter) or now - start + longest > budget:
                         reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
-                    if append >= 0:  # its target (the gather below sets every row's)
+                    if append >= 0:
+                        # its target (the gather below sets every row's), then the update
                         t[append] = up[append] if status[append] > 0 else lo[append]
-                    if append >= 0 and _append_held(A, t, act, slot, lstart, phis, rank_tol,
-                                                    2 * j, append, ws):  # fmt: skip
-                        dirty = 2 * j + 1
+                        if _append_held(A, t, act, slot, lstart, phis, rank_tol, 2 * j,
+                                        append, ws):  # fmt: skip
+                            dirty = 2 * j + 1
                     _gather(A, starts, kind, status, attach, level_of, lo, up, fro,
                                    dirty, act, slot, lstart, t, phis)  # fmt: skip
                     _ehqp(A, t, act, lstart, lam_sub, phis, rank_tol, dirty, upto, ws, nzp, nzi)

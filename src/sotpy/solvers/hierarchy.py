@@ -233,7 +233,7 @@ class _Buffers:
     (the warm start) and the kernel's outputs."""
 
     __slots__ = (
-        "A", "attach", "fro", "info", "lo", "ranks", "res", "sizes", "starts", "startsList",
+        "A", "attach", "fro", "info", "lo", "ranks", "res", "sizes", "starts", "starts_list",
         "status", "up", "warm", "wf", "wi", "x",
     )  # fmt: skip
 
@@ -242,7 +242,7 @@ class _Buffers:
         starts = np.zeros(len(sizes) + 1, dtype=np.int64)
         np.cumsum(sizes, out=starts[1:])
         self.starts = starts
-        self.startsList = [int(s) for s in starts]  # handed out by stacked()
+        self.starts_list = [int(s) for s in starts]  # handed out by stacked()
         m = int(starts[-1])
         self.A = np.zeros((m, n))
         self.lo = np.zeros(m)
@@ -416,7 +416,7 @@ class HierarchySolver:
             if any(m < 0 for m in sizes):
                 raise SolverError(f"HierarchySolver.stacked: negative level size in {sizes}")
             buf = self._buf = self._resized(sizes, self.n)
-        return buf.A, buf.lo, buf.up, buf.startsList
+        return buf.A, buf.lo, buf.up, buf.starts_list
 
     def solve_stacked(self, damping=None, *, equality: bool = False) -> HierarchyResult:
         """Solve the stack written into the buffers of :meth:`stacked`: the same
