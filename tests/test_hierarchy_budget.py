@@ -275,10 +275,90 @@ def test_calls_stopped_by_the_budget_continue_to_the_optimum(jit):
 @pytest.mark.parametrize("jit", JITS)
 def test_a_tiny_time_budget_stops_with_status_time(jit):
     levels = _hard_stacks(1)[0]
-    res = HierarchySolver(jit=jit, time_budget=1e-9).solve(levels)
+    res = HierarchySolver(jit=jit, time_budget=1e-9, cold_time_budget=None).solve(levels)
     assert res.status == "time" and res.budget_hit and not res.converged
     assert np.isfinite(res.x).all() and res.solved < len(levels)
     assert res.iterations >= 1  # a call always makes progress
+
+
+@pytest.mark.parametrize("jit", JITS)
+def test_a_cold_call_gets_the_cold_budget_and_a_warm_one_the_plain_budget(jit):
+    """The first call (no active rows to start from) runs on ``cold_time_budget``; the
+    next, on the same level sizes, on ``time_budget``; after ``reset()``, cold again."""
+    levels = _hard_stacks(1)[0]
+    solver = HierarchySolver(jit=jit, time_budget=1e-9, cold_time_budget=60.0)
+    assert solver.solve(levels).status == "optimal"
+    moved = [(A, lo - 0.5, up + 0.5 * np.sign(up)) for A, lo, up in levels]
+    again = solver.solve(levels[:1] + moved[1:])
+    assert again.status == "time" or again.iterations == 1  # the guess may be right
+    other = [(A[::-1].copy(), lo[::-1].copy(), up[::-1].copy()) for A, lo, up in levels]
+    assert solver.solve(other).status == "time"  # warm start from a wrong set
+    solver.reset()
+    assert solver.solve(other).status == "optimal"
+    with pytest.raises(SolverError, match="cold_time_budget must be a finite number"):
+        solver.cold_time_budget = -1.0
+    with pytest.raises(SolverError, match="cold_time_budget must be a finite number"):
+        solver.cold_time_budget = float("inf")
+    assert solver.cold_time_budget == 60.0
+
+
+@pytest.mark.parametrize("jit", JITS)
+@pytest.mark.parametrize("budget", [None, 1e-9])
+def test_a_warm_row_whose_bound_became_infinite_is_no_warm_start(jit, budget):
+    """A row active at its upper bound in one call, with that bound +inf in the next (a
+    reference set to inf, or other rows in the same places): its old target would be inf
+    and the start point NaN. The answer stays finite and, unbudgeted, optimal."""
+    box = (np.eye(2), np.array([-np.inf, -1.0]), np.array([1.0, 1.0]))
+    goal = (np.eye(2), np.array([3.0, 0.5]), np.array([3.0, 0.5]))
+    solver = HierarchySolver(jit=jit, time_budget=budget, cold_time_budget=None)
+    first = HierarchySolver(jit=jit, time_budget=None).solve([box, goal])
+    np.testing.assert_allclose(first.x, [1.0, 0.5], atol=1e-12)
+    assert solver.solve([box, goal]).x is not None
+    freed = (np.eye(2), np.array([-10.0, -1.0]), np.array([np.inf, 1.0]))
+    res = solver.solve([freed, goal])
+    assert np.isfinite(res.x).all()
+    if budget is None:
+        np.testing.assert_allclose(res.x, [3.0, 0.5], atol=1e-12)
+    # the same on an adversarial stack whose rows trade places
+    levels = _hard_stacks(1)[0]
+    solver = HierarchySolver(jit=jit, time_budget=budget, cold_time_budget=None)
+    solver.solve(levels)
+    other = [(A[::-1].copy(), lo[::-1].copy(), up[::-1].copy()) for A, lo, up in levels]
+    assert np.isfinite(solver.solve(other).x).all()
+
+
+def test_a_stopped_call_ends_within_its_budget_when_iterations_cost_the_same(monkeypatch):
+    """The budget rule: go on only if one more iteration of the longest cost so far and
+    the stopped call's last step (one more eHQP) still fit. On a clock that advances one
+    unit per eHQP (every iteration costs the same), a call given ``B`` units does at most
+    ``B`` eHQPs, and uses its budget (at least ``B - 1``: one more would not have fit)."""
+    from sotpy.solvers import _activeset
+
+    done = [0]
+    real_ehqp = _activeset._ehqp
+
+    def counted(*a, **k):
+        done[0] += 1
+        return real_ehqp(*a, **k)
+
+    class Clock:
+        @staticmethod
+        def thread_time() -> float:
+            return float(done[0])
+
+    monkeypatch.setattr(_activeset, "_ehqp", counted)
+    monkeypatch.setattr(_activeset, "time", Clock)
+    levels = next(lv for lv in _hard_stacks(10) if _iterations(lv) >= 9)
+    for budget in range(3, 9):
+        done[0] = 0
+        res = HierarchySolver(jit=False, time_budget=budget, cold_time_budget=None).solve(levels)
+        assert res.status == "time" and res.budget_hit
+        assert budget - 1 <= done[0] <= budget, (budget, done[0])
+        assert res.iterations == done[0]  # every eHQP is counted, the last step's too
+
+
+def _iterations(levels) -> int:
+    return HierarchySolver(jit=False, time_budget=None).solve(levels).iterations
 
 
 # ---------------------------------------------------------------- SOT and Controller

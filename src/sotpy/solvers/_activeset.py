@@ -115,7 +115,10 @@ rows changed, and computes only the sub-levels down to ``own_j`` during phase ``
 phase reads nothing below; the next phase's first step completes them, which is not
 counted as an iteration since no row changed). The call stops after ``max_iter`` eHQP
 solves, or when the thread's CPU time would exceed ``budget`` with one more iteration of
-the largest cost seen so far.
+the largest cost seen so far (the first counted from the call's start: the input checks,
+the first eHQP and the start check) and then the last step below, which costs about one
+more: the call ends within its budget unless an iteration costs more than every one
+before it, and then by at most that excess.
 Stopped in phase ``j``: levels ``< j`` are optimal; a last step (one eHQP with the
 current active rows of every level; its target corrects the coordinates of the
 sub-levels from ``held_j`` down and keeps those above, and the step goes from the
@@ -315,7 +318,9 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     level_of = np.repeat(np.arange(p), np.diff(starts))
     fro[:] = [np.linalg.norm(A[starts[k] : starts[k + 1]]) for k in range(p)]
     anorm = np.linalg.norm(A, axis=1)
-    status[kind != INEQ] = 0
+    # an equality, a free row, or a bound that is no longer finite (the rows changed since
+    # the last call): no target to warm-start at
+    status[(kind != INEQ) | ((status > 0) & (up == np.inf)) | ((status < 0) & (lo == -np.inf))] = 0
     bad = (status == 0) | (attach < level_of) | (attach > p)
     attach[bad] = level_of[bad]
     lam_sub = np.zeros(2 * p + 1)
@@ -341,7 +346,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
     decided = np.zeros(m, dtype=bool)
     locked = np.zeros(m, dtype=bool)
     longest = 0.0
-    checked = None  # when the budget was last checked
+    checked = start  # when the budget was last checked: the start's work counts too
     reason = OPTIMAL
     solved = p + 1
     # the first phase starts where the previous call's active rows lead: their eHQP point
@@ -385,12 +390,12 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
         while True:
             if stale:
                 # an iteration is all the work from one check to the next (the eHQP, the
-                # target, the step, the verdict): the longest so far predicts the next
+                # target, the step, the verdict): the longest so far predicts the next,
+                # and the last step of a stopped call (one more eHQP) must fit after it
                 now = time.thread_time()
-                if checked is not None:
-                    longest = max(longest, now - checked)
+                longest = max(longest, now - checked)
                 checked = now
-                if its >= max_iter or now - start + longest > budget:
+                if its >= max_iter or now - start + 2.0 * longest > budget:
                     reason = ITERATIONS if its >= max_iter else TIME
                     break
                 subrows, phis, t = build()

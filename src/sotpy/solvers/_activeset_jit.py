@@ -756,7 +756,13 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 kind[i] = INEQ
             else:
                 kind[i] = FREE
-            if kind[i] != INEQ:
+            # an equality, a free row, or a bound that is no longer finite (the rows
+            # changed since the last call): no target to warm-start at
+            if (
+                kind[i] != INEQ
+                or (status[i] > 0 and up[i] == math.inf)
+                or (status[i] < 0 and lo[i] == -math.inf)
+            ):
                 status[i] = 0
             if status[i] == 0 or attach[i] < level_of[i] or attach[i] > p:
                 attach[i] = level_of[i]
@@ -814,7 +820,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         decided = np.zeros(max(m, 1), dtype=np.bool_)
         locked = np.zeros(max(m, 1), dtype=np.bool_)
         longest = 0.0
-        checked = -1.0  # when the budget was last checked
+        checked = start  # when the budget was last checked: the start's work counts too
         reason = OPTIMAL
         solved = p + 1
         # the first phase starts at the eHQP point of the previous call's active rows
@@ -871,12 +877,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
             while True:
                 if stale or extend:
                     # an iteration is all the work from one check to the next (the eHQP,
-                    # the target, the step, the verdict): the longest predicts the next
+                    # the target, the step, the verdict): the longest predicts the next,
+                    # and the last step of a stopped call (one more eHQP) must fit after it
                     now = _cpu_time(clock)
-                    if checked >= 0.0:
-                        longest = max(longest, now - checked)
+                    longest = max(longest, now - checked)
                     checked = now
-                    if (stale and its >= max_iter) or now - start + longest > budget:
+                    if (stale and its >= max_iter) or now - start + 2.0 * longest > budget:
                         reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
                     if append >= 0:

@@ -177,6 +177,22 @@ class Controller(Entity):
         return self.core.hierarchy.time_budget
 
     @command
+    def setColdTimeBudget(self, seconds: float | None) -> None:
+        """The hierarchical strategy's budget for a tick without the full warm start
+        (the first, the first after the levels change size), when larger than the time
+        budget (s of CPU time; finite, > 0; ``None`` from Python: the same; default 2 ms)."""
+        h = self.core.hierarchy
+        h.cold_time_budget = checked_time_budget(
+            f"{self.className}({self.name}).setColdTimeBudget", seconds, h.cold_time_budget
+        )
+        self.solution.setReady()
+
+    @command
+    def getColdTimeBudget(self) -> float | None:
+        """The hierarchical strategy's budget for a cold tick (s; ``None``: the same)."""
+        return self.core.hierarchy.cold_time_budget
+
+    @command
     def setMaxIterations(self, n: int) -> None:
         """The hierarchical strategy's iteration budget per tick (>= 1)."""
         h = self.core.hierarchy

@@ -47,7 +47,9 @@ One method for every stack (:mod:`._activeset` states it): a lexicographic prima
 active-set iteration whose every step is one equality hierarchy of the active rows,
 warm-started with the previous call's active rows. Each call stops at the optimum, or
 after ``max_iter`` equality solves, or when the thread's CPU time exceeds
-``time_budget`` (checked between iterations: exceeded by at most one iteration). A
+``time_budget`` (checked between iterations: a call ends within it unless an
+iteration costs more than every one before it; ``cold_time_budget`` for a call without
+the full warm start). A
 stopped call returns the current iterate, which is finite, no worse than the call's
 starting point on any level in lexicographic order, optimal on the levels it has proven
 (:attr:`HierarchyResult.solved`); the next call continues from its active rows.
@@ -84,9 +86,11 @@ _STATUS = ("optimal", "iterations", "time")
 DEFAULT_TIME_BUDGET = 5e-4
 DEFAULT_TIME_BUDGET_NUMPY = 5e-3
 #: the budget of a call without the full warm start (a solver's first call; the first
-#: after the level sizes changed, whose changed levels start with no active row), as a
-#: multiple of the time budget
-COLD_FACTOR = 20.0
+#: after the level sizes changed, whose changed levels start with no active row), when
+#: it is larger than the time budget: 2 ms, the worst the adversarial kinematic stacks
+#: (n up to 40) need from nothing on this project's machine (bench_worst_case.py)
+DEFAULT_COLD_TIME_BUDGET = 2e-3
+DEFAULT_COLD_TIME_BUDGET_NUMPY = 2e-2
 DEFAULT_MAX_ITER = 200
 _DEFAULT = object()
 
@@ -271,14 +275,19 @@ class HierarchySolver:
             ``eps (1 + ||a_i|| max(1, ||x||_inf))``.
         max_iter: iteration budget of a call (equality-hierarchy solves, >= 1).
         time_budget: time budget of a call, in seconds of the calling thread's CPU time
-            (> 0, finite, or ``None`` for none); exceeded by at most one iteration.
-            Default: ``DEFAULT_TIME_BUDGET`` (0.5 ms) compiled,
-            ``DEFAULT_TIME_BUDGET_NUMPY`` (5 ms) for the NumPy twin. A call without the
-            full warm start gets ``COLD_FACTOR`` (20) times the budget: the first one
-            (or the first after :meth:`reset`), which has to find the active rows from
-            nothing, and the first after the level sizes changed (the levels of
-            unchanged size keep their active rows and the last answer is the start, but
-            the levels that changed start with none).
+            (> 0, finite, or ``None`` for none). A call stops before an iteration after
+            which the last step would not fit (judged by the longest iteration so far):
+            it ends within the budget unless an iteration costs more than every one
+            before it, and then by at most that excess. Default:
+            ``DEFAULT_TIME_BUDGET`` (0.5 ms) compiled, ``DEFAULT_TIME_BUDGET_NUMPY``
+            (5 ms) for the NumPy twin.
+        cold_time_budget: the budget of a call without the full warm start, when larger
+            than ``time_budget`` (> 0, finite, or ``None``: the same budget as every
+            call): the first call (or the first after :meth:`reset`), which has to find
+            the active rows from nothing, and the first after the level sizes changed
+            (the levels of unchanged size keep their active rows and the last answer is
+            the start, but the levels that changed start with none). Default:
+            ``DEFAULT_COLD_TIME_BUDGET`` (2 ms) compiled, 20 ms for the NumPy twin.
         jit: run the iteration as one compiled call (:mod:`._activeset_jit`; ``None``:
             when numba is available and ``SOTPY_JIT`` is not ``0``).
     """
@@ -292,6 +301,7 @@ class HierarchySolver:
         eps: float = 1e-9,
         max_iter: int = DEFAULT_MAX_ITER,
         time_budget: float | object | None = _DEFAULT,
+        cold_time_budget: float | object | None = _DEFAULT,
         jit: bool | None = None,
     ):
         _check_damping_value(damping)
@@ -312,11 +322,16 @@ class HierarchySolver:
                 " (numba missing or SOTPY_JIT=0)"
             )
         self.jit = _activeset_jit.solve is not None if jit is None else bool(jit)
-        self._max_iter = self._time_budget = None
+        self._max_iter = self._time_budget = self._cold_time_budget = None
         self.max_iter = max_iter
         if time_budget is _DEFAULT:
             time_budget = DEFAULT_TIME_BUDGET if self.jit else DEFAULT_TIME_BUDGET_NUMPY
         self.time_budget = time_budget
+        if cold_time_budget is _DEFAULT:
+            cold_time_budget = (
+                DEFAULT_COLD_TIME_BUDGET if self.jit else DEFAULT_COLD_TIME_BUDGET_NUMPY
+            )
+        self.cold_time_budget = cold_time_budget
         if self.jit:
             _jit.prepare("the hierarchical solver", ["sotpy.solvers._activeset_jit"])
         self._buf: _Buffers | None = None
@@ -345,18 +360,17 @@ class HierarchySolver:
 
     @time_budget.setter
     def time_budget(self, value: float | None) -> None:
-        if value is not None:
-            try:
-                v = float(value)
-            except (TypeError, ValueError):
-                v = math.nan
-            if not (v > 0.0 and math.isfinite(v)):
-                raise SolverError(
-                    f"HierarchySolver: time_budget must be a finite number of seconds > 0"
-                    f" (or None), got {value!r} (the setting is unchanged)"
-                )
-            value = v
-        self._time_budget = value
+        self._time_budget = _seconds("time_budget", value)
+
+    @property
+    def cold_time_budget(self) -> float | None:
+        """The budget of a call without the full warm start when larger than
+        :attr:`time_budget`, in seconds of thread CPU time (``None``: the same budget)."""
+        return self._cold_time_budget
+
+    @cold_time_budget.setter
+    def cold_time_budget(self, value: float | None) -> None:
+        self._cold_time_budget = _seconds("cold_time_budget", value)
 
     def reset(self) -> None:
         """Forget the buffers and the warm start."""
@@ -436,8 +450,9 @@ class HierarchySolver:
         p = len(buf.sizes)
         lams = _dampings(self.damping if damping is None else damping, p)
         budget = math.inf if self._time_budget is None else self._time_budget
-        if not buf.warm:  # the first call, or the first after the level sizes changed
-            budget *= COLD_FACTOR
+        if not buf.warm and self._cold_time_budget is not None:
+            # the first call, or the first after the level sizes changed
+            budget = max(budget, self._cold_time_budget)
         args = (buf.A, buf.lo, buf.up, buf.starts, buf.status, buf.attach, lams, self.rank_tol,
                 self.eps, self.dual_tol, self._max_iter, budget, buf.x, buf.res, buf.ranks,
                 buf.fro, buf.info)  # fmt: skip
@@ -545,6 +560,23 @@ class HierarchySolver:
         raise SolverError(f"solve_hierarchy: input refused (code {code})")  # pragma: no cover
 
 
+def _seconds(setting: str, value: float | None) -> float | None:
+    """``value`` as a budget in seconds (finite, > 0, or ``None``), else a
+    :class:`~sotpy.errors.SolverError` naming the setting."""
+    if value is None:
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not (v > 0.0 and math.isfinite(v)) or isinstance(value, bool):
+        raise SolverError(
+            f"HierarchySolver: {setting} must be a finite number of seconds > 0 (or None),"
+            f" got {value!r} (the setting is unchanged)"
+        )
+    return v
+
+
 def checked_time_budget(who: str, seconds: float | None, now: float | None) -> float | None:
     """``seconds`` as an entity's time budget (finite, > 0, or ``None``: none), else a
     :class:`~sotpy.errors.CommandError` naming ``who`` (``"SOT(sot).setTimeBudget"``)
@@ -555,8 +587,9 @@ def checked_time_budget(who: str, seconds: float | None, now: float | None) -> f
         seconds, bool
     )
     if not (ok and math.isfinite(seconds) and seconds > 0.0):
+        what = "cold time budget" if who.endswith("setColdTimeBudget") else "time budget"
         raise CommandError(
-            f"{who}: the time budget must be a finite number of seconds > 0, got"
+            f"{who}: the {what} must be a finite number of seconds > 0, got"
             f" {seconds!r}; the budget is unchanged ({now})"
         )
     return float(seconds)

@@ -360,6 +360,22 @@ class SOT(Entity):
         return self._solver.time_budget
 
     @command
+    def setColdTimeBudget(self, seconds: float | None) -> None:
+        """The budget of a tick without the full warm start (the first tick, the first
+        after a task is pushed or a level changes size), when larger than the time budget
+        (s of CPU time; finite, > 0; ``None`` from Python: the same budget; default 2 ms)."""
+        now = self._solver.cold_time_budget
+        self._solver.cold_time_budget = checked_time_budget(
+            f"SOT({self.name}).setColdTimeBudget", seconds, now
+        )
+        self.control.setReady()
+
+    @command
+    def getColdTimeBudget(self) -> float | None:
+        """The budget of a tick without the full warm start (s; ``None``: the same)."""
+        return self._solver.cold_time_budget
+
+    @command
     def setMaxIterations(self, n: int) -> None:
         """The solver's iteration budget per tick (equality-hierarchy solves, >= 1)."""
         now = self._solver.max_iter
