@@ -66,21 +66,18 @@ def _talos_wbc(talos, strategy):
     return w
 
 
-@pytest.mark.parametrize("strategy", ["OneLevelWeighted", "MultiLevelWeighted"])
-def test_talos_dynamics_contacts_and_bounds(talos, strategy):
-    w = _talos_wbc(talos, strategy)
-    q, v = talos.q0.copy(), np.zeros(talos.model.nv)
-    sol = w.update(q, v)
-    assert sol.found, sol.reason
-    # equations of motion, rebuilt independently from Pinocchio
+def _check_talos(talos, sol, feet, q, v, standing=True):
+    """The solution against Pinocchio: the equations of motion with the contacts
+    ``feet``, no foot acceleration, friction pyramids and CoP rectangles, torque limits."""
     data = talos.model.createData()
     M = pin.crba(talos.model, data, q)
     M = np.triu(M) + np.triu(M, 1).T
     b = pin.nonLinearEffects(talos.model, data, q, v)
     pin.computeJointJacobians(talos.model, data, q)
     pin.updateFramePlacements(talos.model, data)
+    assert sol.f.shape == (6 * len(feet),)
     rhs = np.concatenate([np.zeros(6), sol.tau])
-    for i, c in enumerate(_feet()):
+    for i, c in enumerate(feet):
         J = pin.getFrameJacobian(talos.model, data, talos.model.getFrameId(c.frame), pin.LOCAL)
         rhs += J.T @ sol.f[6 * i : 6 * i + 6]
         # the feet do not accelerate (LOCAL spatial acceleration at a, v)
@@ -93,12 +90,36 @@ def test_talos_dynamics_contacts_and_bounds(talos, strategy):
         G, h = friction_rows(c)
         fc = sol.f[6 * i : 6 * i + 6]
         assert np.all(G @ fc <= h + 1e-6)
-        assert fc[2] > 100.0  # standing: carries weight
+        if standing:
+            assert fc[2] > 100.0  # standing: carries weight
         cop_x, cop_y = -fc[4] / fc[2], fc[3] / fc[2]
         assert -0.1075 - 1e-6 <= cop_x <= 0.0975 + 1e-6 and abs(cop_y) <= 0.061 + 1e-6
     assert np.max(np.abs(M @ sol.a + b - rhs)) < 1e-8
     lim = talos.model.effortLimit[6:]
     assert np.all(np.abs(sol.tau) <= lim + 1e-6)
+
+
+@pytest.mark.parametrize("strategy", ["OneLevelWeighted", "MultiLevelWeighted"])
+def test_talos_dynamics_contacts_and_bounds(talos, strategy):
+    w = _talos_wbc(talos, strategy)
+    q, v = talos.q0.copy(), np.zeros(talos.model.nv)
+    sol = w.update(q, v)
+    assert sol.found, sol.reason
+    _check_talos(talos, sol, _feet(), q, v)
+
+
+@pytest.mark.parametrize("strategy", ["OneLevelWeighted", "MultiLevelWeighted"])
+def test_talos_contacts_changed_at_run_time(talos, strategy):
+    """One foot, then both again: the problem has other variables each time (6 wrench
+    components fewer, then more), and each answer meets that tick's contacts."""
+    w = _talos_wbc(talos, strategy)
+    q, v = talos.q0.copy(), np.zeros(talos.model.nv)
+    assert w.update(q, v).found
+    for feet in (_feet()[:1], _feet()):
+        w.setContacts(feet)
+        sol = w.update(q, v)
+        assert sol.found, sol.reason
+        _check_talos(talos, sol, feet, q, v, standing=len(feet) == 2)
 
 
 def test_cartesian_drift_matches_finite_differences(panda):

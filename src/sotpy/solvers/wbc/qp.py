@@ -361,6 +361,21 @@ def _to_y(E: np.ndarray, f: np.ndarray, nv: int, na: int, Tt: np.ndarray, tt: np
     return Ey, fy
 
 
+def _to_y_into(
+    E: np.ndarray, out: np.ndarray, nv: int, na: int, Tt: np.ndarray, tt: np.ndarray
+) -> np.ndarray | None:
+    """Write the rows ``E`` (over ``chi``) as rows over ``y`` into ``out``: ``E chi =
+    out y + E_tau t_tau``. Returns ``E_tau t_tau`` to subtract from the rows' targets,
+    or None when ``E`` has no torque entry."""
+    Et = E[:, nv : nv + na]
+    out[:, :nv] = E[:, :nv]
+    out[:, nv:] = E[:, nv + na :]
+    if not Et.any():
+        return None
+    out += Et @ Tt
+    return Et @ tt
+
+
 def _as_index(idx) -> slice | np.ndarray:
     """A slice when the indices are a contiguous increasing run (cheaper to apply),
     else an index array."""

@@ -88,7 +88,7 @@ from .constraints import (
     JointTorqueLimit,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
-from .qp import WeightedQP, _to_y, packed_views
+from .qp import WeightedQP, _as_index, _to_y_into, packed_views
 from .tasks import ContactWrenchCost, Task
 
 __all__ = ["RATE_TIME", "STRATEGIES", "Solution", "WholeBodyController"]
@@ -601,13 +601,15 @@ class WholeBodyController:
         eliminated through the actuated rows of the equations of motion, as the
         weighted strategy does (``tau = T y + t``; on Talos 82 -> 50 variables and 38 ->
         6 equality rows in the hard level), every constraint and task row mapped to
-        ``y`` (:func:`.qp._to_y`); the final minimum-norm criterion is then on the
-        accelerations and wrenches. ``chi`` is rebuilt from ``y``."""
+        ``y`` and written straight into the solver's own buffers
+        (:meth:`HierarchySolver.stacked`); the final minimum-norm criterion is then on
+        the accelerations and wrenches. ``chi`` is rebuilt from ``y``. ``tasks`` are the
+        stacked rows of :meth:`problem` (``self._assembly``)."""
         A, c = dyn
         C, lo, hi = cons
-        if np.any(lo > hi + 1e-12) or np.any(np.isnan(lo)) or np.any(np.isnan(hi)):
+        if not (lo <= hi + 1e-12).all():  # a NaN bound fails the comparison too
             return None, False, "a constraint has lower > upper (infeasible bounds)"
-        L = self.layout
+        L, asm = self.layout, self._assembly
         nv, na = L.nv, L.na
         r, u = self.robot.actuated, self._unactuated
         ny = L.n - na
@@ -615,36 +617,40 @@ class WholeBodyController:
         Tt[:, :nv] = A[r, :nv]
         Tt[:, nv:] = A[r, nv + na :]
         tt = -c[r]
-        Au = np.empty((len(u), ny))
-        Au[:, :nv] = A[u, :nv]
-        Au[:, nv:] = A[u, nv + na :]
-        Cy, shift = _to_y(C, np.zeros(C.shape[0]), nv, na, Tt, tt)
-        lo_y, hi_y = lo + shift, hi + shift
-        nr = self._rate_rows
-        m = C.shape[0] - nr
-        hard = (
-            np.vstack([Au, Cy[:m]]),
-            np.concatenate([c[u], lo_y[:m]]),
-            np.concatenate([c[u], hi_y[:m]]),
-        )
-        levels: list[tuple] = [hard]
-        if nr:  # the torque-rate rows of a transition: a level of their own, after the hard
-            levels.append((Cy[m:], lo_y[m:], hi_y[m:]))  # one (their least violation)
-        # the contact wrench cost (level -1) joins the last task level, with its weight:
-        # a level of its own below would get only the freedom the posture leaves (none
-        # on a humanoid), and a light foot's wrench would sit on its cone's edges
-        order = sorted({t[0] for t in tasks if t[0] >= 0}) or [-1]
-        for lvl in order:
-            last = lvl == order[-1]
-            rows = [(E, f, w) for (k, E, f, w) in tasks if k == lvl or (last and k == -1)]
-            if not rows:
-                continue
-            E = np.vstack([q[0] for q in rows])
-            f = np.concatenate([q[1] for q in rows])
-            sw = np.sqrt(np.concatenate([q[2] for q in rows]))
-            Ey, fy = _to_y(E, f, nv, na, Tt, tt)
-            levels.append((Ey * sw[:, None], fy * sw))
-        res = self.last_hierarchy = self.hierarchy.solve(levels)
+        nu, nr = len(u), self._rate_rows
+        mc = C.shape[0]
+        # level 0: the unactuated dynamics and the constraints but the rate rows; then
+        # the rate rows of a transition (their least violation), then the task levels
+        sizes = [nu + mc - nr] + ([nr] if nr else []) + asm.level_sizes
+        h = self.hierarchy
+        if h.n != ny:  # the contacts changed: another number of variables
+            h.reset()
+            h.n = ny
+        H, hlo, hup, starts = h.stacked(sizes)
+        H[:nu, :nv] = A[u, :nv]
+        H[:nu, nv:] = A[u, nv + na :]
+        hlo[:nu] = c[u]
+        hup[:nu] = c[u]
+        shift = _to_y_into(C, H[nu : nu + mc], nv, na, Tt, tt)
+        hlo[nu : nu + mc] = lo
+        hup[nu : nu + mc] = hi
+        if shift is not None:
+            hlo[nu : nu + mc] -= shift
+            hup[nu : nu + mc] -= shift
+        # each task level's rows scaled by sqrt(w): the level's least squares is weighted
+        first = 2 if nr else 1
+        for k, rows in enumerate(asm.levels):
+            s, e = starts[first + k], starts[first + k + 1]
+            Hk, fk = H[s:e], hlo[s:e]
+            shift = _to_y_into(asm.E[rows], Hk, nv, na, Tt, tt)
+            fk[:] = asm.f[rows]
+            if shift is not None:
+                fk -= shift
+            sw = np.sqrt(asm.w[rows])
+            Hk *= sw[:, None]
+            fk *= sw
+            hup[s:e] = fk
+        res = self.last_hierarchy = h.solve_stacked()
         if not res.feasible:
             if res.budget_hit and res.solved == 0:
                 return (
@@ -696,6 +702,21 @@ class _Assembly:
         if ncost:
             self.cost_rows = (self.E[r:], self.f[r:], self.w[r:])
             self.tasks.append((-1, *self.cost_rows))
+        # the hierarchical strategy's task levels, in order: the rows of each (a slice
+        # when they are contiguous); the contact wrench cost joins the last level
+        spans, r = [], 0
+        for (task, _w), k in zip(live, sizes, strict=True):
+            spans.append((task.level, r, r + k))
+            r += k
+        order = sorted({lvl for lvl, _, _ in spans}) or [-1]
+        if ncost:
+            spans.append((order[-1], r, m))
+        self.levels, self.level_sizes = [], []
+        for lvl in order:
+            rows = np.concatenate([np.arange(a, b) for k, a, b in spans if k == lvl] or [[]])
+            if len(rows):
+                self.levels.append(_as_index(rows))
+                self.level_sizes.append(len(rows))
         self.con_rows = []
         r = 0
         for k in counts:
