@@ -39,6 +39,7 @@ difference). Usage::
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 from typing import Any
@@ -239,6 +240,11 @@ def torque(duration: float) -> dict[str, Any]:
     return s
 
 
+def _us(value: float) -> str:
+    """A time in us for the table, ``-`` where there was no such call."""
+    return "-" if math.isnan(value) else f"{value:.0f}"
+
+
 def table(rows: list[tuple[str, dict[str, Any]]]) -> str:
     lines = [
         "| case | solves | median us | p99 us | worst us | worst CPU us: cold calls / others"
@@ -257,7 +263,7 @@ def table(rows: list[tuple[str, dict[str, Any]]]) -> str:
             )
         lines.append(
             f"| {name} | {s['n']} | {s['median']:.0f} | {s['p99']:.0f} | {s['worst']:.0f}"
-            f" | {s['worst_cpu_first']:.0f} / {s['worst_cpu']:.0f} | {s['hits']}"
+            f" | {_us(s['worst_cpu_first'])} / {_us(s['worst_cpu'])} | {s['hits']}"
             f" | {s['its']:.1f} ({s['its_max']}) | {note} |"
         )
     return "\n".join(lines)
