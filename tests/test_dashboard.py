@@ -369,8 +369,9 @@ def test_the_3d_view_starts_on_demand_and_leaves_with_the_dashboard():
         viewer = ui.viewer
         assert reply["ok"] and reply["result"] == viewer.url()
         assert any(viewer.display.path in s for s in robot.device.after.list())
-        loop.step(40)  # the view follows every 20 ticks
-        assert viewer.flush(10.0) and viewer.sent >= 2
+        for k in (1, 2):  # the view follows every 20 ticks; a frame handed over while
+            loop.step(20)  # the sender is busy replaces the one waiting: flush each
+            assert viewer.flush(10.0) and viewer.sent >= k
     finally:
         ui.close()
     assert not viewer.isOpen() and not pool.hasEntity(viewer.name)
