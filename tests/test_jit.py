@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -82,3 +83,59 @@ def test_prepare_announces_a_compile_before_it_and_is_silent_once_cached(tmp_pat
     assert "[1/1] sotpy_tiny_kernels: done" in first[-1]
     assert list(tmp_path.glob("__pycache__/sotpy_tiny_kernels.twice-*.nbi"))
     assert runs[1].stderr == ""  # loaded from the cache: nothing said
+
+
+def _literal_int(node) -> bool:
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        node = node.operand
+    return (
+        isinstance(node, ast.Constant)
+        and isinstance(node.value, int)
+        and not isinstance(node.value, bool)
+    )
+
+
+def test_kernels_call_their_helpers_without_integer_literals():
+    """numba compiles a helper once per integer literal it is called with (its type is
+    ``Literal[int](0)``, not ``int64``): the solver's module compiled four of its
+    helpers two or three times, 14 s of a cold start on the 2-core machine. Inside a
+    kernel module, a call to another kernel of the module passes no integer literal."""
+    import pathlib
+
+    root = pathlib.Path(_jit.__file__).parent
+    modules = [
+        root / "solvers" / "_activeset_jit.py",
+        root / "solvers" / "wbc" / "_kernels.py",
+        root / "tasks" / "_rowkernels.py",
+        root / "tasks" / "_collisionkernels.py",
+    ]
+    found = []
+    for path in modules:
+        tree = ast.parse(path.read_text())
+        kernels = {  # functions decorated with @kernel(...) or wrapped as kernel(f)
+            f.name
+            for f in ast.walk(tree)
+            if isinstance(f, ast.FunctionDef)
+            and any("kernel" in ast.unparse(d) for d in f.decorator_list)
+        }
+        kernels |= {
+            a.targets[0].id
+            for a in ast.walk(tree)
+            if isinstance(a, ast.Assign)
+            and isinstance(a.value, ast.Call)
+            and ast.unparse(a.value.func) == "kernel"
+            and isinstance(a.targets[0], ast.Name)
+        }
+        assert kernels, path
+        for f in ast.walk(tree):
+            if not (isinstance(f, ast.FunctionDef) and f.name in kernels):
+                continue
+            for call in ast.walk(f):
+                if (
+                    isinstance(call, ast.Call)
+                    and isinstance(call.func, ast.Name)
+                    and call.func.id in kernels
+                    and any(_literal_int(a) for a in call.args)
+                ):
+                    found.append(f"{path.name}:{call.lineno} {ast.unparse(call)[:60]}")
+    assert not found, found
