@@ -98,7 +98,7 @@ def _literal_int(node) -> bool:
 def test_kernels_call_their_helpers_without_integer_literals():
     """numba compiles a helper once per integer literal it is called with (its type is
     ``Literal[int](0)``, not ``int64``): the solver's module compiled four of its
-    helpers two or three times, 14 s of a cold start on the 2-core machine. Inside a
+    helpers two or three times, about 9 s of its 39 s compile on the 2-core machine. Inside a
     kernel module, a call to another kernel of the module passes no integer literal."""
     import pathlib
 

@@ -699,7 +699,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
         start = _cpu_time(clock)
         # 0 and 1 as int64 values, not literals: numba compiles a helper once per literal
         # argument it is called with (and once per literal a variable holds while its
-        # type is inferred), which cost a third of this module's compile time
+        # type is inferred), which cost about a fifth of this module's compile time
         I0 = clock[0] * 0
         I1 = I0 + 1
         m, n = A.shape
