@@ -1,6 +1,9 @@
 """Shared fixtures and the ``needs`` marker.
 
 - Every test starts and ends with an empty pool at tick 0.
+- The compiled kernels are compiled before use (``SOTPY_JIT=wait``, unless the
+  environment sets it), not in the background as a first run does: a test must know
+  which twin it runs. ``tests/test_jit.py`` runs the background compile itself.
 - ``@pytest.mark.needs("dot")`` (or ``"chromium"``, ``"sphinx"``): the test needs a
   program that ``pip install -e '.[test]'`` does not bring (Graphviz's ``dot``, a
   headless Chromium, the documentation tools of the ``docs`` extra); it is skipped,
@@ -20,6 +23,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+
+os.environ.setdefault("SOTPY_JIT", "wait")  # before sotpy is imported
 
 from sotpy.graph.pool import pool
 

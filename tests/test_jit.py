@@ -1,4 +1,4 @@
-"""sotpy._jit: the switch and the first-compile notice."""
+"""sotpy._jit: the switch, the first-compile notice, the background compile."""
 
 from __future__ import annotations
 
@@ -6,6 +6,9 @@ import ast
 import os
 import subprocess
 import sys
+import time
+
+import pytest
 
 from sotpy import _jit
 
@@ -30,7 +33,7 @@ def test_sotpy_jit_0_turns_the_kernels_off():
         import numba  # noqa: F401
     except ImportError:
         return
-    assert _enabled_with(None) == "True False"
+    assert _enabled_with("wait") == "True False"
 
 
 def test_first_compile_is_reported_on_stderr(capsys):
@@ -67,8 +70,7 @@ def test_prepare_announces_a_compile_before_it_and_is_silent_once_cached(tmp_pat
         "from sotpy import _jit; _jit.prepare('the tiny kernel', ['sotpy_tiny_kernels']);"
         "import sotpy_tiny_kernels as m, numpy as np; print(m.twice(np.full(1, 4.0)))"
     )
-    env = dict(os.environ)
-    env.pop("SOTPY_JIT", None)
+    env = dict(os.environ, SOTPY_JIT="wait")
     env.pop("NUMBA_CACHE_DIR", None)
     runs = [
         subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
@@ -83,6 +85,121 @@ def test_prepare_announces_a_compile_before_it_and_is_silent_once_cached(tmp_pat
     assert "[1/1] sotpy_tiny_kernels: done" in first[-1]
     assert list(tmp_path.glob("__pycache__/sotpy_tiny_kernels.twice-*.nbi"))
     assert runs[1].stderr == ""  # loaded from the cache: nothing said
+    assert (tmp_path / "__pycache__" / "sotpy_tiny_kernels.sotpy-ready.json").exists()
+
+
+TINY_AUTO = """
+import numpy as np
+from sotpy._jit import kernel
+
+
+def _twice(a):
+    return 2.0 * a[0]
+
+
+twice_k = kernel(_twice)
+twice = twice_k or _twice
+
+
+def warm_up():
+    if twice_k is not None:
+        twice_k(np.ones(1))
+        twice_k.disable_compile()
+"""
+
+
+def _run_auto(tmp_path, env):
+    code = (
+        f"import sys; sys.path.insert(0, {str(tmp_path)!r});"
+        "from sotpy import _jit; import sotpy_auto_kernels as m;"
+        "_jit.prepare('the tiny kernel', ['sotpy_auto_kernels']);"
+        "import numpy as np; print(m.twice_k is not None, m.twice(np.full(1, 4.0)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return out
+
+
+def _wait_for(path, seconds=120.0):
+    end = time.monotonic() + seconds
+    while not path.exists() and time.monotonic() < end:
+        time.sleep(0.2)
+    assert path.exists(), f"no {path.name} after {seconds} s"
+
+
+def test_a_first_run_uses_numpy_and_compiles_in_the_background(tmp_path):
+    """``auto`` (the default): a module not compiled yet runs its NumPy twin at once, a
+    background process compiles it, the next run uses the compiled kernel; editing the
+    module's source makes it count as not compiled again."""
+    pytest.importorskip("numba")
+    source = tmp_path / "sotpy_auto_kernels.py"
+    source.write_text(TINY_AUTO)
+    env = dict(os.environ)
+    env.pop("SOTPY_JIT", None)  # the default
+    env.pop("NUMBA_CACHE_DIR", None)
+    mark = tmp_path / "__pycache__" / "sotpy_auto_kernels.sotpy-ready.json"
+    first = _run_auto(tmp_path, env)
+    assert first.stdout.split() == ["False", "8.0"]  # the NumPy twin, at once
+    lines = first.stderr.splitlines()
+    assert lines[0].startswith("sotpy: the tiny kernel: not compiled on this machine yet;")
+    assert "in the background" in lines[0]
+    assert lines[-1].startswith("sotpy: the background compile of sotpy_auto_kernels:")
+    _wait_for(mark)
+    second = _run_auto(tmp_path, env)
+    assert second.stdout.split() == ["True", "8.0"]  # compiled, loaded from the cache
+    assert second.stderr == ""
+    # an edited module is not the one compiled: NumPy again, and a compile again
+    source.write_text(TINY_AUTO + "\n# edited\n")
+    third = _run_auto(tmp_path, env)
+    assert third.stdout.split() == ["False", "8.0"]
+    assert "not compiled on this machine yet" in third.stderr
+    _wait_for(mark)  # (rewritten when the compile ends; a leftover process would lock)
+    deadline = time.monotonic() + 120
+    while _run_auto(tmp_path, env).stdout.split()[0] != "True":
+        assert time.monotonic() < deadline, "the edited module was never compiled"
+        time.sleep(1.0)
+
+
+def test_a_compile_waits_for_the_one_running(tmp_path, capsys):
+    """One compile at a time per install: while another process holds the compile lock,
+    taking it says so and waits until it is released."""
+    if _jit._fcntl is None:
+        pytest.skip("no fcntl: compiles are not serialised on this platform")
+    path = _jit._lock_path()
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, sys, time; f = open(sys.argv[1], 'a+b');"
+            "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(1.5)",
+            str(path),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        start = time.monotonic()
+        with _jit._compile_lock("sotpy: waiting for the other compile"):
+            waited = time.monotonic() - start  # the holder lets go when it ends
+    finally:
+        holder.wait(timeout=30)
+    assert waited > 0.5
+    assert "waiting for the other compile" in capsys.readouterr().err
+    with _jit._compile_lock("sotpy: waiting"):  # free: taken at once, nothing said
+        pass
+    assert capsys.readouterr().err == ""
+
+
+def test_sotpy_jit_values():
+    assert _jit._mode(None) == _jit._mode("1") == _jit._mode(" AUTO ") == "auto"
+    assert _jit._mode("0") == "off"
+    assert _jit._mode("wait") == "wait"
+
+
+def test_an_unknown_sotpy_jit_value_is_said_and_means_auto(capsys):
+    assert _jit._mode("fast") == "auto"
+    assert "SOTPY_JIT='fast' is not 0, 1, auto or wait" in capsys.readouterr().err
 
 
 def _literal_int(node) -> bool:
@@ -138,3 +255,42 @@ def test_kernels_call_their_helpers_without_integer_literals():
                 ):
                     found.append(f"{path.name}:{call.lineno} {ast.unparse(call)[:60]}")
     assert not found, found
+
+
+def test_compile_modules_compiles_what_is_not_ready_once(tmp_path):
+    """What ``sotpy compile`` runs: the modules without a ready mark are compiled (in a
+    child process) and marked; a second call has nothing to do."""
+    pytest.importorskip("numba")
+    (tmp_path / "sotpy_cm_kernels.py").write_text(TINY_AUTO)
+    code = (
+        f"import sys; sys.path.insert(0, {str(tmp_path)!r});"
+        "from sotpy import _jit;"
+        "print(_jit.compile_modules(['sotpy_cm_kernels'], quiet=True),"
+        " _jit.compile_modules(['sotpy_cm_kernels'], quiet=True),"
+        " _jit.ready('sotpy_cm_kernels'))"
+    )
+    env = dict(os.environ)
+    env.pop("SOTPY_JIT", None)  # as `sotpy compile` runs: the default mode
+    env.pop("NUMBA_CACHE_DIR", None)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[-2] == "['sotpy_cm_kernels'] [] True"
+    assert list(tmp_path.glob("__pycache__/sotpy_cm_kernels._twice-*.nbi"))
+
+
+def test_sotpy_compile_leaves_every_kernel_module_ready():
+    pytest.importorskip("numba")
+    env = dict(os.environ)
+    env.pop("SOTPY_JIT", None)
+    out = subprocess.run(
+        [sys.executable, "-m", "sotpy", "compile"], env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    assert "every kernel module is ready" in out.stdout
+    code = (
+        "import importlib; from sotpy import _jit;"
+        "[importlib.import_module(n) for n in _jit.EXPECTED_SECONDS];"
+        "print(all(_jit.ready(n) for n in _jit.EXPECTED_SECONDS))"
+    )
+    check = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert check.stdout.strip() == "True", check.stderr

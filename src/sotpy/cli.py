@@ -14,6 +14,7 @@
                                [--safety M] [--influence M] [--gain V] [--viewer [--hold S]]
     sotpy demo torque-callbacks [--no-compute]
     sotpy robots
+    sotpy compile
     sotpy shell [ROBOT] [--dt S] [--no-ipython]
     sotpy serve [ROBOT] [--dt S] [--host H] [--port P] [--connection-file PATH] [--paused]
                 [--zenoh PATH]
@@ -214,6 +215,38 @@ def add_robots(subparsers: Any) -> None:
         "operational points (SoT name=Pinocchio frame). Loads each model (a few seconds).",
     )
     p.set_defaults(func=_robots_run)
+
+
+def _compile_run(args: argparse.Namespace) -> int:
+    from . import _jit
+
+    if not _jit.ENABLED:
+        print("sotpy compile: nothing to compile (numba missing or SOTPY_JIT=0)")
+        return 0
+    done = _jit.compile_modules()
+    names = list(_jit.EXPECTED_SECONDS)
+    failed = [n for n in names if not _jit.ready(n)]
+    for name in failed:
+        print(f"sotpy compile: {name} could not be compiled", file=sys.stderr)
+    if not failed:
+        what = f"compiled {len(done)}, " if done else ""
+        print(f"sotpy compile: every kernel module is ready ({what}{len(names)} in all)")
+    return 1 if failed else 0
+
+
+def add_compile(subparsers: Any) -> None:
+    """``sotpy compile``: compile the per-tick kernels now rather than in a first run's
+    background."""
+    p = subparsers.add_parser(
+        "compile",
+        help="compile the per-tick kernels now (for a robot's install)",
+        description="Compile every compiled per-tick kernel that is not in numba's cache "
+        "yet, showing progress, and wait for any compile another sotpy run started. "
+        "Without it a first run uses the NumPy kernels and compiles in the background "
+        "(docs/solvers.md, 'First use on a machine'); run it once after installing on "
+        "a robot, so that the first 1 kHz run is compiled. Exit code 1 if a module fails.",
+    )
+    p.set_defaults(func=_compile_run)
 
 
 # -- shell, serve, connect -------------------------------------------------------------
@@ -471,7 +504,7 @@ def add_run(subparsers: Any) -> None:
 
 
 #: The functions that each add one sub-command to the parser's sub-parsers.
-SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots]
+SUBCOMMANDS: list[Callable[[Any], None]] = [add_demo, add_robots, add_compile]
 SUBCOMMANDS += [add_shell, add_serve, add_connect]
 SUBCOMMANDS += [add_run]
 

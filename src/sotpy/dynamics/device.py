@@ -133,7 +133,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .._jit import kernel
+from .._jit import kernel, prepare
 from ..errors import (
     CommandError,
     ContactError,
@@ -244,8 +244,20 @@ def _finite_np(x: np.ndarray) -> bool:
 
 # the per-tick checks of the step: one compiled call each instead of two or three NumPy
 # calls (the NumPy twins without numba)
-_inside_c = kernel(_inside) or _inside_np
-_finite_c = kernel(_finite) or _finite_np
+_inside_k = kernel(_inside)
+_finite_k = kernel(_finite)
+_inside_c = _inside_k or _inside_np
+_finite_c = _finite_k or _finite_np
+
+
+def warm_up() -> None:
+    """Compile the step's checks (or load them from numba's cache) for the arrays the
+    device passes, so that the first tick does not pay for it."""
+    if _inside_k is None or _finite_k is None:
+        return
+    z = np.zeros(1)
+    _inside_k(z, z, z)
+    _finite_k(z)
 
 
 class Device(Entity):
@@ -289,9 +301,7 @@ class Device(Entity):
         self._model = model
         self._data = model.createData()
         self._nq, self._nv = model.nq, model.nv
-        z = np.zeros(1)  # compile (or load) the step's checks now, not at the first tick
-        _inside_c(z, z, z)
-        _finite_c(z)
+        prepare("the device's checks", ["sotpy.dynamics.device"])  # now, not at a tick
         self._freeFlyer = model.njoints > 1 and model.joints[1].shortname() == "JointModelFreeFlyer"
         self._tauOffset = 6 if self._freeFlyer else 0
         self._ntau = self._nv - self._tauOffset

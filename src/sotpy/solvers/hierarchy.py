@@ -289,7 +289,8 @@ class HierarchySolver:
             the start, but the levels that changed start with none). Default:
             ``DEFAULT_COLD_TIME_BUDGET`` (2 ms) compiled, 20 ms for the NumPy twin.
         jit: run the iteration as one compiled call (:mod:`._activeset_jit`; ``None``:
-            when numba is available and ``SOTPY_JIT`` is not ``0``).
+            when numba is available, ``SOTPY_JIT`` is not ``0`` and the kernels are
+            compiled on this machine, see :mod:`sotpy._jit`).
     """
 
     def __init__(
@@ -319,7 +320,7 @@ class HierarchySolver:
         if jit and _activeset_jit.solve is None:
             raise SolverError(
                 "HierarchySolver: jit=True but compiled kernels are unavailable"
-                " (numba missing or SOTPY_JIT=0)"
+                f" ({_jit.UNAVAILABLE})"
             )
         self.jit = _activeset_jit.solve is not None if jit is None else bool(jit)
         self._max_iter = self._time_budget = self._cold_time_budget = None

@@ -708,7 +708,7 @@ class SOT(Entity):
         if enabled and _rowkernels.pose_rows is None:
             raise CommandError(
                 f"SOT({self.name}).setTaskFusion: the fused evaluation needs the compiled "
-                "kernels (numba missing or SOTPY_JIT=0)"
+                f"kernels ({_jit.UNAVAILABLE})"
             )
         if enabled:
             _jit.prepare("the task rows", ["sotpy.tasks._rowkernels"])

@@ -91,7 +91,7 @@ class WeightedQP:
         tail = isinstance(self.actuated, slice) and (self.actuated.start == _stop(self.unactuated))
         if jit and (_kernels.solve is None or not tail):
             raise SotpyError(
-                "WeightedQP: compiled kernels unavailable (numba missing, SOTPY_JIT=0,"
+                f"WeightedQP: compiled kernels unavailable ({_jit.UNAVAILABLE};"
                 " or actuated joints that are not the last velocities)"
             )
         self.jit = bool(_kernels.solve is not None and tail) if jit is None else bool(jit)
