@@ -79,7 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import SotpyError, SotpyWarning
-from ..hierarchy import HierarchySolver
+from ..hierarchy import NUMPY_BUDGET_FACTOR, HierarchySolver
 from ._kernels import data_layout
 from .constraints import (
     Constraint,
@@ -97,7 +97,8 @@ STRATEGIES = ("OneLevelWeighted", "MultiLevelWeighted")
 #: the hierarchical strategy's default time budget per tick (s of CPU time): on Talos an
 #: iteration of its solver costs 0.1 to 0.4 ms and the dynamics and rows about 0.5 ms, so
 #: 1.5 ms keeps a tick within about 2.5 ms while a transition needs several iterations
-#: (the kinematic SOT's solver gets 0.5 ms: its iterations cost about 40 us)
+#: (the kinematic SOT's solver gets 0.5 ms: its iterations cost about 40 us); the NumPy
+#: twin (no compiled kernels) gets ``NUMPY_BUDGET_FACTOR`` times it, as the SOT's does
 HIERARCHY_TIME_BUDGET = 1.5e-3
 
 #: The default torque rate bound of transitions: each joint's effort limit per
@@ -159,6 +160,8 @@ class WholeBodyController:
         self.setStrategy(strategy)
         self.setRegularisation(regularisation)
         self.hierarchy = HierarchySolver(time_budget=HIERARCHY_TIME_BUDGET)
+        if not self.hierarchy.jit:
+            self.hierarchy.time_budget = HIERARCHY_TIME_BUDGET * NUMPY_BUDGET_FACTOR
         #: the hierarchical strategy's last HierarchyResult (None before its first tick)
         self.last_hierarchy = None
         self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
