@@ -92,7 +92,7 @@ DEFAULT_COLD_TIME_BUDGET = 2e-3
 #: 1 kHz humanoid tick (measured on the collision demo's Talos stack: a solve of 3 ms
 #: median, 2 ms an iteration, 15 times the compiled kernel's): its budget bounds a
 #: pathological solve (seconds) rather than a tick. With 10 times (5 ms), a tenth of that
-#: demo's ticks stopped at it and its feet drifted 5 um; with 40, one tick in 3000.
+#: demo's ticks stopped at it and its feet drifted 5 um; with 20 ms, one tick in 3000.
 NUMPY_BUDGET_FACTOR = 40.0
 DEFAULT_TIME_BUDGET_NUMPY = DEFAULT_TIME_BUDGET * NUMPY_BUDGET_FACTOR
 DEFAULT_COLD_TIME_BUDGET_NUMPY = DEFAULT_COLD_TIME_BUDGET * NUMPY_BUDGET_FACTOR
