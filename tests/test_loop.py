@@ -259,7 +259,9 @@ def _torn_run(use_lock: bool, ticks: int = 10_000) -> tuple[LoopTestPair, int]:
 def test_edits_under_the_lock_are_never_torn_over_1e4_ticks():
     pair, edits = _torn_run(use_lock=True)
     assert pair.reads >= 10_000
-    assert edits > 100  # the editor did run concurrently
+    # the editor did run concurrently; how often depends on how the machine shares its
+    # cores between the two threads (97 edits were seen on a loaded 2-core machine)
+    assert edits > 10
     assert pair.torn == []
 
 
