@@ -294,3 +294,57 @@ def test_sotpy_compile_leaves_every_kernel_module_ready():
     )
     check = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert check.stdout.strip() == "True", check.stderr
+
+
+def _owners():
+    import numpy as np
+
+    from sotpy.solvers import _activeset_jit
+    from sotpy.solvers.hierarchy import HierarchySolver
+    from sotpy.solvers.wbc import _kernels
+    from sotpy.solvers.wbc.qp import WeightedQP
+
+    return [
+        (lambda jit: WeightedQP(np.arange(6, 10), np.arange(6), jit=jit), _kernels, "solve"),
+        (lambda jit: HierarchySolver(jit=jit), _activeset_jit, "solve"),
+    ]
+
+
+@pytest.mark.parametrize("index", [0, 1], ids=["WeightedQP", "HierarchySolver"])
+def test_an_owner_of_a_module_not_compiled_yet_starts_its_compile(monkeypatch, index):
+    """A first run on a machine: the module's kernels are ``None`` (not compiled), the
+    owner runs the NumPy code and asks ``prepare`` for its module, which compiles it in
+    the background for the next runs; asked for NumPy (``jit=False``), it asks nothing."""
+    make, module, name = _owners()[index]
+    calls: list[list[str]] = []
+    monkeypatch.setattr(_jit, "prepare", lambda what, modules: calls.append(list(modules)))
+    monkeypatch.setattr(module, name, None)  # as imported before the first compile
+    owner = make(None)
+    assert owner.jit is False
+    assert calls == [[module.__name__]]
+    calls.clear()
+    assert make(False).jit is False
+    assert calls == []
+
+
+def test_a_weighted_controller_leaves_the_hierarchical_kernels_alone(monkeypatch):
+    """Nothing is compiled that the run does not use: a ``OneLevelWeighted`` controller
+    asks only for the whole-body QP kernel; its hierarchical solver is made (and its
+    kernels asked for) when ``MultiLevelWeighted`` is chosen, at construction or later."""
+    import example_robot_data as erd
+
+    from sotpy.solvers.wbc import WholeBodyController
+
+    model = erd.load("panda").model
+    calls: list[str] = []
+    monkeypatch.setattr(_jit, "prepare", lambda what, modules: calls.extend(modules))
+    w = WholeBodyController(model)
+    assert w._hierarchy is None
+    assert calls == ["sotpy.solvers.wbc._kernels"]
+    w.setStrategy("MultiLevelWeighted")
+    assert w._hierarchy is not None
+    assert calls == ["sotpy.solvers.wbc._kernels", "sotpy.solvers._activeset_jit"]
+    calls.clear()
+    h = WholeBodyController(model, "MultiLevelWeighted")._hierarchy
+    assert h is not None
+    assert "sotpy.solvers._activeset_jit" in calls

@@ -338,7 +338,9 @@ class HierarchySolver:
                 DEFAULT_COLD_TIME_BUDGET if self.jit else DEFAULT_COLD_TIME_BUDGET_NUMPY
             )
         self.cold_time_budget = cold_time_budget
-        if self.jit:
+        if self.jit or jit is None:
+            # loaded from the cache; on a machine's first use compiled in the background
+            # for the next runs (this solver keeps the NumPy code), said on stderr first
             _jit.prepare("the hierarchical solver", ["sotpy.solvers._activeset_jit"])
         self._buf: _Buffers | None = None
         limit_blas_threads()  # small matrices: BLAS threads only wait for a core

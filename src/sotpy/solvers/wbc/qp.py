@@ -95,8 +95,9 @@ class WeightedQP:
                 " or actuated joints that are not the last velocities)"
             )
         self.jit = bool(_kernels.solve is not None and tail) if jit is None else bool(jit)
-        if self.jit:
-            # compiled in a child process on a machine's first use, said on stderr
+        if self.jit or (jit is None and tail):
+            # loaded from the cache; on a machine's first use compiled in the background
+            # for the next runs (this one keeps the NumPy code), said on stderr first
             _jit.prepare("the whole-body QP kernel", ["sotpy.solvers.wbc._kernels"])
         self.guess_hits = 0
         self.daqp_solves = 0

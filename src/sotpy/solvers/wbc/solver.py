@@ -157,11 +157,9 @@ class WholeBodyController:
         self.tasks: dict[str, Task] = {}
         self.constraints: dict[str, Constraint] = {}
         self.contact_constraint = ContactConstraint("contacts")
+        self._hierarchy: HierarchySolver | None = None
         self.setStrategy(strategy)
         self.setRegularisation(regularisation)
-        self.hierarchy = HierarchySolver(time_budget=HIERARCHY_TIME_BUDGET)
-        if not self.hierarchy.jit:
-            self.hierarchy.time_budget = HIERARCHY_TIME_BUDGET * NUMPY_BUDGET_FACTOR
         #: the hierarchical strategy's last HierarchyResult (None before its first tick)
         self.last_hierarchy = None
         self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
@@ -190,6 +188,23 @@ class WholeBodyController:
         if getattr(self, "strategy", strategy) != strategy:
             self.transition = True
         self.strategy = strategy
+        if strategy == "MultiLevelWeighted":
+            self._make_hierarchy()  # now (kernels loaded, or their compile started), not at a tick
+
+    @property
+    def hierarchy(self) -> HierarchySolver:
+        """The solver of the ``MultiLevelWeighted`` strategy, made when first needed (that
+        strategy chosen, or one of its settings read or set): a weighted controller
+        neither loads nor, on a machine's first run, compiles its kernels."""
+        return self._make_hierarchy()
+
+    def _make_hierarchy(self) -> HierarchySolver:
+        if self._hierarchy is None:
+            h = HierarchySolver(time_budget=HIERARCHY_TIME_BUDGET)
+            if not h.jit:
+                h.time_budget = HIERARCHY_TIME_BUDGET * NUMPY_BUDGET_FACTOR
+            self._hierarchy = h
+        return self._hierarchy
 
     def setTorqueRateLimit(self, rate: object) -> None:
         """The torque rate bound of transitions (N m/s; one value or one per actuated
