@@ -13,12 +13,17 @@ import pytest
 
 @pytest.mark.parametrize(
     "demo, verdict",
-    [("talos", "reach OK: talos"), ("talos-collision", "talos-collision OK")],
+    [
+        ("talos", "reach OK: talos"),
+        ("talos-collision", "talos-collision OK"),
+        ("talos-torque", "talos-torque OK"),
+    ],
 )
 def test_the_demos_pass_their_checks_on_the_numpy_twins(demo, verdict):
-    """The kinematic demos run as a fresh machine's first run does (``SOTPY_JIT=0``: the
-    same NumPy kernels as a module not compiled yet); each prints its verdict after
-    checking its own run (wrist, feet, CoM, limits; distances, chatter)."""
+    """The demos run as a fresh machine's first run does (``SOTPY_JIT=0``: the same NumPy
+    kernels as a module not compiled yet); each prints its verdict after checking its own
+    run (wrist, feet, CoM, limits; distances, chatter; the feet on the floor, forces,
+    CoPs, torque steps, tracking)."""
     env = dict(os.environ, SOTPY_JIT="0")
     out = subprocess.run(
         [sys.executable, "-m", "sotpy", "demo", demo],
