@@ -388,3 +388,22 @@ def test_min_jerk_closed_form_and_derivatives():
     w_fd = pin.log3(Mp.rotation @ Mm.rotation.T) / (2 * h)  # world angular velocity
     assert np.allclose(vel[3:], w_fd, atol=1e-6)
     assert np.allclose(acc, (vp - vm) / (2 * h), atol=1e-5)
+
+
+def test_the_model_update_leaves_the_zero_acceleration_kinematics(talos):
+    """``RobotModel.update`` runs ``computeAllTerms`` only: the joints' velocities and
+    accelerations it leaves must be Pinocchio's ``forwardKinematics(q, v, 0)`` (the
+    drifts ``Jdot v`` and the CoM's are read from them)."""
+    model = talos.model
+    w = WholeBodyController(model)
+    ref = model.createData()
+    for seed in range(3):
+        q, v = _state(model, pin.randomConfiguration(model), seed)
+        q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.1 * seed, 0.2, -0.3)).coeffs()
+        w.robot.update(q, v)
+        pin.forwardKinematics(model, ref, q, v, np.zeros(model.nv))
+        pin.centerOfMass(model, ref, pin.KinematicLevel.ACCELERATION, False)
+        for i in range(1, model.njoints):
+            assert np.allclose(w.robot.data.v[i].vector, ref.v[i].vector, atol=1e-12)
+            assert np.allclose(w.robot.data.a[i].vector, ref.a[i].vector, atol=1e-12)
+        assert np.allclose(w.robot.com_drift, ref.acom[0], atol=1e-12)

@@ -183,7 +183,6 @@ class RobotModel:
         self.S = np.zeros((self.na, self.nv))
         self.S[np.arange(self.na), self.actuated] = 1.0
         self.minus_St = -self.S.T  # the torque columns of the equations of motion
-        self._a0 = np.zeros(self.nv)
         self._strict_lower = np.tril(np.ones((self.nv, self.nv), dtype=bool), -1)
         self._M = np.zeros((self.nv, self.nv))
         self._M_stale = True
@@ -232,8 +231,10 @@ class RobotModel:
         ):
             raise SotpyError("RobotModel.update: q or v is not finite")
         m, d = self.model, self.data
-        pin.computeAllTerms(m, d, q, v)  # M (upper), nle, joint Jacobians, com, Jcom
-        pin.forwardKinematics(m, d, q, v, self._a0)  # data.v, data.a at a = 0: drifts
+        # M (upper), nle, joint Jacobians, com, Jcom; and data.v, data.a at a = 0 (the
+        # bias of its forward pass: the drifts), as forwardKinematics(q, v, 0) would leave
+        # them (tests/test_wbc_core.py checks it)
+        pin.computeAllTerms(m, d, q, v)
         pin.updateFramePlacements(m, d)
         pin.centerOfMass(m, d, _ACCELERATION, False)  # vcom, acom of data.a (dJcom v)
         self._M_stale = True
