@@ -76,8 +76,7 @@ def work_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[in
         ("H", (ny, ny)), ("g", (ny,)), ("Au", (nu, ny)), ("cu", (nu,)), ("Cy", (mc, ny)),
         ("lo_y", (mc,)), ("hi_y", (mc,)), ("Tt", (na, ny)), ("tt", (na,)), ("y", (ny,)),
         ("L", (ny, ny)), ("ey", (ny,)), ("X", (ny, kmax + 1)), ("Wt", (kmax + 1, ny)),
-        ("sr", (kmax,)),
-        ("bs", (kmax,)), ("S", (kmax, kmax)), ("lam", (kmax,)),
+        ("sr", (kmax,)), ("bs", (kmax,)), ("S", (kmax, kmax)), ("lam", (kmax,)),
         ("chi", (n,)), ("res", (1,)),
     ):  # fmt: skip
         out[name] = (o, shape)
