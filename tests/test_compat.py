@@ -318,6 +318,7 @@ def test_matrix_util_against_pinocchio(hook):
 
     rng = np.random.default_rng(8)
     for _ in range(5):
+        v_ = rng.standard_normal(3)
         r, p, y = rng.uniform(-1.5, 1.5, 3)
         M = np.array(mu.rpy2tr(r, p, y))
         np.testing.assert_allclose(M[:3, :3], pin.rpy.rpyToMatrix(r, p, y), atol=1e-14)
@@ -337,11 +338,16 @@ def test_matrix_util_against_pinocchio(hook):
         np.testing.assert_allclose(
             mu.quaternionToMatrix(q), pin.Quaternion(q[3], *q[:3]).toRotationMatrix(), atol=1e-14
         )
-        v = rng.standard_normal(3)
-        Q = np.array(mu.generateOrthonormalM(v))
-        np.testing.assert_allclose(Q.T @ Q, np.eye(3), atol=1e-12)
-        np.testing.assert_allclose(Q[:, 0], v / np.linalg.norm(v), atol=1e-12)
-        assert np.linalg.det(Q) == pytest.approx(1.0)
+        # a random direction, a coordinate axis and directions within 1e-9 rad of one
+        for v in (rng.standard_normal(3), np.eye(3)[_ % 3], np.eye(3)[_ % 3] + 1e-9 * v_):
+            Q = np.array(mu.generateOrthonormalM(v))
+            np.testing.assert_allclose(Q.T @ Q, np.eye(3), atol=1e-15)
+            np.testing.assert_allclose(Q[:, 0], v / np.linalg.norm(v), atol=1e-15)
+            assert np.linalg.det(Q) == pytest.approx(1.0, abs=1e-15)
+            assert mu.generateOrthonormalM(v) == mu.generateOrthonormalM(v)  # not random
+    for bad in ([0.0, 0.0, 0.0], [1.0, np.nan, 0.0], [1.0, 2.0]):
+        with pytest.raises(ValueError, match="generateOrthonormalM: v1 must be"):
+            mu.generateOrthonormalM(bad)
     assert mu.vectorToTuple(np.array([[1.0], [2.0]])) == (1.0, 2.0)
     assert mu.vectorToTuple(np.array([[1.0, 2.0]])) == (1.0, 2.0)
     assert mu.matrixToTuple(np.eye(2)) == ((1.0, 0.0), (0.0, 1.0))

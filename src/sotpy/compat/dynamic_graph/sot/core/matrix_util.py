@@ -115,22 +115,22 @@ def distVector(M2: Any, M1: Any) -> list[float]:
 
 
 def generateOrthonormalM(v1: Any) -> tuple[tuple[float, ...], ...]:
-    """A rotation matrix (tuple of rows) whose first column is ``v1 / |v1|``, the two
-    others completed from random vectors by Gram-Schmidt (so not unique)."""
+    """A rotation matrix (tuple of rows) whose first column is ``e1 = v1 / |v1|``: the
+    second column is ``e1 x a / |e1 x a|``, ``a`` the coordinate axis least aligned with
+    ``e1`` (``|e1 x a| >= sqrt(2/3)``), the third ``e1 x e2``: orthonormal to rounding,
+    determinant +1. sot-core completes the basis from random vectors instead; any
+    completion is a valid answer, this one is the same at every call. ``v1``: a finite,
+    nonzero 3-vector (``ValueError`` otherwise)."""
     e1 = np.asarray(v1, dtype=float).ravel()
-    e1 = e1 / np.linalg.norm(e1)
-    rng = np.random.default_rng()
-    basis = [e1]
-    while len(basis) < 3:
-        u = rng.random(3)
-        for e in basis:
-            u = u - (u @ e) * e
-        n = np.linalg.norm(u)
-        if n > 1e-6:
-            basis.append(u / n)
-    if np.linalg.det(np.column_stack(basis)) < 0:
-        basis[2] = -basis[2]
-    return matrixToTuple(np.column_stack(basis))
+    n = float(np.linalg.norm(e1)) if e1.shape == (3,) else 0.0
+    if not (math.isfinite(n) and n > 0.0):
+        raise ValueError(f"generateOrthonormalM: v1 must be a finite nonzero 3-vector, got {v1!r}")
+    e1 = e1 / n
+    a = np.zeros(3)
+    a[int(np.argmin(np.abs(e1)))] = 1.0
+    e2 = np.cross(e1, a)
+    e2 /= np.linalg.norm(e2)
+    return matrixToTuple(np.column_stack((e1, e2, np.cross(e1, e2))))
 
 
 def quaternionToMatrix(q: Any) -> list[list[float]]:
