@@ -317,8 +317,8 @@ def test_matrix_util_against_pinocchio(hook):
     from dynamic_graph.sot.core import matrix_util as mu
 
     rng = np.random.default_rng(8)
-    for _ in range(5):
-        v_ = rng.standard_normal(3)
+    for k in range(5):
+        tilt = 1e-9 * rng.standard_normal(3)
         r, p, y = rng.uniform(-1.5, 1.5, 3)
         M = np.array(mu.rpy2tr(r, p, y))
         np.testing.assert_allclose(M[:3, :3], pin.rpy.rpyToMatrix(r, p, y), atol=1e-14)
@@ -339,7 +339,7 @@ def test_matrix_util_against_pinocchio(hook):
             mu.quaternionToMatrix(q), pin.Quaternion(q[3], *q[:3]).toRotationMatrix(), atol=1e-14
         )
         # a random direction, a coordinate axis and directions within 1e-9 rad of one
-        for v in (rng.standard_normal(3), np.eye(3)[_ % 3], np.eye(3)[_ % 3] + 1e-9 * v_):
+        for v in (rng.standard_normal(3), np.eye(3)[k % 3], np.eye(3)[k % 3] + tilt):
             Q = np.array(mu.generateOrthonormalM(v))
             np.testing.assert_allclose(Q.T @ Q, np.eye(3), atol=1e-15)
             np.testing.assert_allclose(Q[:, 0], v / np.linalg.norm(v), atol=1e-15)

@@ -23,12 +23,15 @@ whole-body problem look like rather than treating them as dense:
   guessed multiplier has the sign of its bound (``DUAL_TOL``): the optimality
   conditions of the convex QP.
 
-The dense steps are written as dot products along contiguous rows (the Cholesky
-factor row by row, one forward substitution per right-hand side, ``W^T W`` from the
-rows of ``W^T``), which the compiler vectorises once sums may be reassociated
-(``kernel(fast=True)``); the same steps as rank-one updates along columns, or with the
-Hessian's envelope skipped, measured 1.4 to 3 times slower on Talos's 50 variables
-(the floating base's rows make the augmented Hessian dense anyway).
+The dense steps run along contiguous rows, which the compiler vectorises once sums may
+be reassociated (``kernel(fast=True)``): the augmentation as one rank-one update of
+``L``'s rows per nonzero entry of a scaled row of ``G`` (stored as the rows of ``W^T``,
+then solved in place), the Cholesky factor row by row, one forward substitution per
+right-hand side and ``W^T W`` as dot products. The same solves as updates of a column
+block (all right-hand sides at once, short rows) measured 3 times slower, and the
+previous version of this kernel, which skipped the Hessian's envelope, 1.45 times slower
+as a whole on Talos's 50 variables (the floating base's rows make the augmented Hessian
+dense anyway).
 
 The data come packed in one array and the results go to one workspace array (their
 layouts: :func:`data_layout`, :func:`work_layout`): at these sizes (50 variables on
@@ -75,8 +78,8 @@ def work_layout(nv: int, na: int, n: int, m: int, mc: int) -> dict[str, tuple[in
     for name, shape in (
         ("H", (ny, ny)), ("g", (ny,)), ("Au", (nu, ny)), ("cu", (nu,)), ("Cy", (mc, ny)),
         ("lo_y", (mc,)), ("hi_y", (mc,)), ("Tt", (na, ny)), ("tt", (na,)), ("y", (ny,)),
-        ("L", (ny, ny)), ("ey", (ny,)), ("X", (ny, kmax + 1)), ("Wt", (kmax + 1, ny)),
-        ("sr", (kmax,)), ("bs", (kmax,)), ("S", (kmax, kmax)), ("lam", (kmax,)),
+        ("L", (ny, ny)), ("ey", (ny,)), ("Wt", (kmax + 1, ny)), ("sr", (kmax,)),
+        ("bs", (kmax,)), ("S", (kmax, kmax)), ("lam", (kmax,)),
         ("chi", (n,)), ("res", (1,)),
     ):  # fmt: skip
         out[name] = (o, shape)
@@ -116,15 +119,15 @@ def _forward(L, x, n):  # pragma: no cover - compiled
         x[i] = s / Li[i]
 
 
-def _put_column(X, p, row, b, hmax, sr, bs, n):  # pragma: no cover - compiled
-    """Column ``p`` of ``X`` = ``sqrt(rho) row`` and ``bs[p] = sqrt(rho) b``, ``rho =
-    hmax / |row|^2`` (1 for a zero row, which the multipliers' solve then refuses)."""
+def _put_row(out, row, b, hmax, sr, bs, p, n):  # pragma: no cover - compiled
+    """``out = sqrt(rho) row`` and ``bs[p] = sqrt(rho) b``, ``rho = hmax / |row|^2`` (1
+    for a zero row, which the multipliers' solve then refuses); ``sr[p] = sqrt(rho)``."""
     nrm = 0.0
     for j in range(n):
         nrm += row[j] * row[j]
     scale = np.sqrt(hmax / nrm) if nrm > 0.0 else 1.0
     for j in range(n):
-        X[j, p] = scale * row[j]
+        out[j] = scale * row[j]
     sr[p] = scale
     bs[p] = scale * b
 
@@ -180,8 +183,6 @@ def _solve(
     o += ny * ny
     ey = ws[o : o + ny]
     o += ny
-    X = ws[o : o + ny * (kmax + 1)].reshape((ny, kmax + 1))
-    o += ny * (kmax + 1)
     Wt = ws[o : o + (kmax + 1) * ny].reshape((kmax + 1, ny))
     o += (kmax + 1) * ny
     sr = ws[o : o + kmax]
@@ -276,8 +277,7 @@ def _solve(
     if status != 0 or not guess:
         return status, False
     # the guessed KKT system G y = b: the equalities, then the guessed rows, each row
-    # scaled by sqrt(rho_p), rho_p = max diag H / |G_p|^2, and stored as a column of X
-    # (the multi-right-hand-side solves below then run along X's rows)
+    # scaled by sqrt(rho_p), rho_p = max diag H / |G_p|^2, as a row of Wt
     nact = act.shape[0]
     k = nu + neq + nact
     if k > kmax:
@@ -288,42 +288,44 @@ def _solve(
             hmax = H[i, i]
     r = 0
     for i in range(nu):
-        _put_column(X, r, Au[i], cu[i], hmax, sr, bs, ny)
+        _put_row(Wt[r], Au[i], cu[i], hmax, sr, bs, r, ny)
         r += 1
     for i in range(mc):
         if lo[i] == hi[i]:
-            _put_column(X, r, Cy[i], loy[i], hmax, sr, bs, ny)
+            _put_row(Wt[r], Cy[i], loy[i], hmax, sr, bs, r, ny)
             r += 1
     for t in range(nact):
         i = act[t]
-        _put_column(X, r, Cy[i], hiy[i] if up[t] else loy[i], hmax, sr, bs, ny)
+        _put_row(Wt[r], Cy[i], hiy[i] if up[t] else loy[i], hmax, sr, bs, r, ny)
         r += 1
     # augmented Lagrangian: H_a = H + G^T R G and g_a = g - G^T R b have the same
     # optimum on G y = b and the same multipliers, but no direction that the equalities
     # pin and only eps penalises: the range-space solve is then as accurate as an LU of
-    # the KKT matrix. g_a goes to X's last column.
+    # the KKT matrix. H_a's lower triangle goes to L, g_a to Wt's last row; one
+    # rank-one update along L's rows per nonzero entry of a scaled row.
+    u = Wt[k]
     for i in range(ny):
-        Xi = X[i]
+        Li = L[i]
+        Hi = H[i]
         for j in range(i + 1):
-            Xj = X[j]
-            s = H[i, j]
-            for p in range(k):
-                s += Xi[p] * Xj[p]
-            L[i, j] = s
-        s = g[i]
-        for p in range(k):
-            s -= Xi[p] * bs[p]
-        Xi[k] = s
+            Li[j] = Hi[j]
+        u[i] = g[i]
+    for p in range(k):
+        Wp = Wt[p]
+        bp = bs[p]
+        for i in range(ny):
+            wi = Wp[i]
+            if wi != 0.0:
+                Li = L[i]
+                for j in range(i + 1):
+                    Li[j] += wi * Wp[j]
+                u[i] -= wi * bp
     if not _cholesky(L, ny):  # H_a = L L^T, in place
         return status, False
-    # the rows of (W, u)^T = (L^{-1} (G^T R^1/2, g_a))^T: forward substitutions, each
-    # a sequence of dot products along contiguous rows
+    # the rows of (W, u)^T = (L^{-1} (G^T R^1/2, g_a))^T, in place: forward
+    # substitutions, each a sequence of dot products along contiguous rows
     for p in range(k + 1):
-        Wp = Wt[p]
-        for i in range(ny):
-            Wp[i] = X[i, p]
-        _forward(L, Wp, ny)
-    u = Wt[k]
+        _forward(L, Wt[p], ny)
     # the scaled multipliers: (W^T W) lambda = -(b_s + W^T u)
     for p in range(k):
         Wp = Wt[p]
@@ -421,7 +423,7 @@ def _solve(
 
 _cholesky = kernel(_cholesky, fast=True)
 _forward = kernel(_forward, fast=True)
-_put_column = kernel(_put_column, fast=True)
+_put_row = kernel(_put_row, fast=True)
 solve = kernel(_solve, fast=True)
 _warm: list[bool] = []
 
