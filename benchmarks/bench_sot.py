@@ -53,7 +53,7 @@ Each repeat builds every contender afresh (same start) and runs them interleaved
 take turns every :data:`CHUNK` ticks (:func:`interleave`; the sotpy graphs share the
 pool under different entity names), so that a change of the machine's load hits them
 alike; the order of the turns rotates from one repeat to the next. Per-tick times are
-pooled over the repeats for the median and the p99; a ratio is the median of the
+pooled over the repeats for the median, the p99 and the worst; a ratio is the median of the
 per-repeat ratios of medians. The garbage collector is left on for both sides. Usage::
 
     python benchmarks/bench_sot.py              # full run, prints Markdown
@@ -760,9 +760,9 @@ def compare_table(result: dict[str, Any]) -> str:
         f"{scene.wrist_start_distance:.3f} m from its target at the start), "
         f"{result['repeats']} interleaved repeats.",
         "",
-        "| controller | median us/tick | p99 us/tick | solver call us | feet drift m "
-        "| feet rot rad | CoM xy err m | wrist dist m | posture err rad | notes |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| controller | median us/tick | p99 us/tick | worst us/tick | solver call us "
+        "| feet drift m | feet rot rad | CoM xy err m | wrist dist m | posture err rad | notes |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for name, c in result["contenders"].items():
         tick = c.pooled()
@@ -786,6 +786,7 @@ def compare_table(result: dict[str, Any]) -> str:
         lines.append(
             f"| {name} | {_fmt(np.median(tick) if len(tick) else np.nan)} "
             f"| {_fmt(np.percentile(tick, 99) if len(tick) else np.nan)} "
+            f"| {_fmt(np.max(tick) if len(tick) else np.nan)} "
             f"| {_fmt(np.median(solve) if len(solve) else np.nan)} "
             f"| {err.get('feet', np.nan):.1e} | {err.get('feet_rot', np.nan):.1e} "
             f"| {err.get('com', np.nan):.1e} | {err.get('wrist', np.nan):.1e} "
@@ -873,6 +874,7 @@ def _breakdown_row(label: str, episodes: list[Episode], extra: dict[str, Any]) -
         "label": label,
         "tick": float(np.median(tick)),
         "p99": float(np.percentile(tick, 99)),
+        "worst": float(np.max(tick)),
         "graph": float(np.median(graph)),
         "solve": float(np.median(solve)),
         "integration": float(np.median(integ)),
@@ -962,14 +964,15 @@ def scaling_tasks_table(rows: list[dict[str, Any]], ticks: int, repeats: int) ->
         "repeats; us per tick (medians; the parts are medians of their own, so they need not "
         "add up exactly).",
         "",
-        "| tasks | task rows | median tick | p99 tick | graph + kinematics | solve | integration "
-        "| solve paths |",
-        "|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| tasks | task rows | median tick | p99 tick | worst tick | graph + kinematics | solve "
+        "| integration | solve paths |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
         fail = f"; **failed**: {r['failure']}" if r["failure"] else ""
         lines.append(
-            f"| {r['tasks']} | {r['rows']} | {r['tick']:.0f} | {r['p99']:.0f} | {r['graph']:.0f} "
+            f"| {r['tasks']} | {r['rows']} | {r['tick']:.0f} | {r['p99']:.0f} | {r['worst']:.0f} "
+            f"| {r['graph']:.0f} "
             f"| {r['solve']:.0f} | {r['integration']:.0f} | {_methods(r['methods'])}{fail} |"
         )
     return "\n".join(lines)
@@ -982,16 +985,17 @@ def scaling_dof_table(
         f"The stand-and-reach against the degrees of freedom: {ticks} ticks x {repeats} "
         "repeats; us per tick (medians); wrist distance at the end (m).",
         "",
-        "| robot | nv | task rows | median tick | p99 tick | graph + kinematics | solve "
-        "| integration | solve paths | wrist dist | "
+        "| robot | nv | task rows | median tick | p99 tick | worst tick | graph + kinematics "
+        "| solve | integration | solve paths | wrist dist | "
         + (f"Pink {solver} tick | sotpy/Pink | Pink wrist dist |" if solver else ""),
-        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|" + ("---:|---:|---:|" if solver else ""),
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|"
+        + ("---:|---:|---:|" if solver else ""),
     ]
     for r in rows:
         fail = f"; **failed**: {r['failure']}" if r["failure"] else ""
         line = (
             f"| {r['label']} | {r['nv']} | {r['rows']} | {r['tick']:.0f} | {r['p99']:.0f} "
-            f"| {r['graph']:.0f} | {r['solve']:.0f} | {r['integration']:.0f} "
+            f"| {r['worst']:.0f} | {r['graph']:.0f} | {r['solve']:.0f} | {r['integration']:.0f} "
             f"| {_methods(r['methods'])}{fail} | {r['errors']['wrist']:.1e} |"
         )
         if solver:
