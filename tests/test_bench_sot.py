@@ -193,3 +193,20 @@ def test_profile_summary(bench_sot):
     text = bench_sot.profile_sotpy(ticks=5, top=4)
     assert "| sotpy.solvers |" in text and "| sotpy.graph |" in text
     assert text.count("\n| `") == 4
+
+
+def test_a_budget_hit_is_counted_and_the_episode_goes_on(bench_sot, scene):
+    import warnings
+
+    controller = bench_sot.build_sotpy_reach(scene)
+    controller.sot.setMaxIterations(1)  # every tick that needs a second iteration stops
+    with warnings.catch_warnings():
+        bench_sot.episode_warnings()
+        ep = bench_sot.run_sotpy(controller, scene, 120, breakdown=False)
+    assert ep.failure is None and len(ep.tick) == 120  # not cut at the first hit
+    assert ep.budget_hits == controller.sot.budgetHits > 0
+    # an unsatisfiable hard level still fails the episode under the same filters
+    with warnings.catch_warnings():
+        bench_sot.episode_warnings()
+        with pytest.raises(bench_sot.SotpyWarning):
+            warnings.warn("a hard level is infeasible", bench_sot.SotpyWarning, stacklevel=1)
