@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 import time
+import types
 
 import pytest
 
@@ -348,3 +349,54 @@ def test_a_weighted_controller_leaves_the_hierarchical_kernels_alone(monkeypatch
     h = WholeBodyController(model, "MultiLevelWeighted")._hierarchy
     assert h is not None
     assert "sotpy.solvers._activeset_jit" in calls
+
+
+def test_a_background_compile_behind_another_says_so(monkeypatch, capsys):
+    """A second run started while a first one's background compile holds the lock: its
+    own background compile waits behind it, and both messages say so instead of
+    promising the compile's usual length."""
+    if _jit._fcntl is None:
+        pytest.skip("no fcntl: compiles are not serialised on this platform")
+
+    class Pending:  # the background process, still running at exit
+        pid = 4242
+
+        def poll(self):
+            return None
+
+    fake = types.SimpleNamespace(Popen=lambda *a, **k: Pending(), DEVNULL=subprocess.DEVNULL)
+    monkeypatch.setattr(_jit, "subprocess", fake)  # this module's subprocess is untouched
+    monkeypatch.setattr(_jit, "_background", [])
+    monkeypatch.setattr(_jit.atexit, "register", lambda fn: None)
+    monkeypatch.setattr(_jit, "_prepared", set())
+    assert not _jit._lock_busy()
+    _jit._compile_in_background("the kernels", ["sotpy.tasks._rowkernels"])
+    _jit._report_background()
+    err = capsys.readouterr().err
+    assert "(about " in err and "s of about" in err and "behind" not in err
+    path = _jit._lock_path()
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, sys, time; f = open(sys.argv[1], 'a+b');"
+            "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); sys.stdin.read()",
+            str(path),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        assert _jit._lock_busy()
+        _jit._background.clear()
+        _jit._compile_in_background("the kernels", ["sotpy.tasks._rowkernels"])
+        _jit._report_background()
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)
+    err = capsys.readouterr().err
+    assert "another sotpy run is compiling kernels for this install" in err
+    assert "behind the compile another sotpy run started" in err and "pid 4242" in err
+    assert not _jit._lock_busy()  # released with its holder

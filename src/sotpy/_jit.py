@@ -215,6 +215,19 @@ def _compile_lock(waiting: str | None = None) -> Iterator[None]:
             _fcntl.flock(f, _fcntl.LOCK_UN)
 
 
+def _lock_busy() -> bool:
+    """Whether another process holds this install's compile lock now (a compile runs)."""
+    if _fcntl is None:  # pragma: no cover
+        return False
+    with open(_lock_path(), "a+b") as f:
+        try:
+            _fcntl.flock(f, _fcntl.LOCK_EX | _fcntl.LOCK_NB)
+        except OSError:
+            return True
+        _fcntl.flock(f, _fcntl.LOCK_UN)
+        return False
+
+
 def _expected(names: Sequence[str]) -> float:
     """The expected wall time of compiling ``names`` in parallel on this machine (s)."""
     workers = min(len(names), max(1, os.cpu_count() or 1))
@@ -264,11 +277,20 @@ def _compile_in_background(what: str, names: list[str]) -> None:
     compile already running for this install), and say so first."""
     _prepared.update(names)  # once per process: this run keeps the NumPy twins
     log = _lock_path().with_suffix(".log")
+    # a compile another run started (usually of these very modules): the one started
+    # here waits for it and then compiles only what it left not ready
+    busy = _lock_busy()
+    when = (
+        "another sotpy run is compiling kernels for this install: the background compile"
+        " waits for it, then compiles what it leaves"
+        if busy
+        else f"about {_expected(names):.0f} s"
+    )
     print(
         f"sotpy: {what}: not compiled on this machine yet; this run uses their NumPy"
         " kernels (slower per tick) and compiles them in the background for the next"
-        f" runs (about {_expected(names):.0f} s; `sotpy compile` or SOTPY_JIT=wait"
-        " compiles before running instead)",
+        f" runs ({when}; `sotpy compile` or SOTPY_JIT=wait compiles before running"
+        " instead)",
         file=sys.stderr,
         flush=True,
     )
@@ -289,15 +311,21 @@ def _compile_in_background(what: str, names: list[str]) -> None:
         )
     if not _background:
         atexit.register(_report_background)
-    _background.append((names, proc, time.perf_counter(), log))
+    _background.append((names, proc, time.perf_counter(), log, busy))
 
 
 def _report_background() -> None:
     """At exit: how far the background compiles this process started have got."""
-    for names, proc, start, log in _background:
+    for names, proc, start, log, busy in _background:
         seconds = time.perf_counter() - start
         code = proc.poll()
-        if code is None:
+        if code is None and busy:
+            state = (
+                f"still running, behind the compile another sotpy run started ({seconds:.0f}"
+                f" s so far, pid {proc.pid}); the runs started after it ends use the compiled"
+                " kernels"
+            )
+        elif code is None:
             state = (
                 f"still running ({seconds:.0f} s of about {_expected(names):.0f}, pid"
                 f" {proc.pid}); the runs started after it ends use the compiled kernels"
