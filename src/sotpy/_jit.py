@@ -104,8 +104,9 @@ _lock = threading.Lock()
 _cache_dirs: dict[str, Path] = {}
 #: module -> whether its ready mark was valid when it was imported (``auto`` mode)
 _ready_at_import: dict[str, bool] = {}
-#: the background compiles started by this process: (modules, process, start, log)
-_background: list[tuple[list[str], subprocess.Popen[bytes], float, Path]] = []
+#: the background compiles started by this process: (modules, process, start, log,
+#: whether another run's compile held the lock when it started)
+_background: list[tuple[list[str], subprocess.Popen[bytes], float, Path, bool]] = []
 
 
 def kernel(fn: F | None = None, *, fast: bool = False) -> Any:
