@@ -327,12 +327,11 @@ def test_a_warm_row_whose_bound_became_infinite_is_no_warm_start(jit, budget):
     assert np.isfinite(solver.solve(other).x).all()
 
 
-def test_a_stopped_call_ends_within_its_budget_when_iterations_cost_the_same(monkeypatch):
-    """The budget rule: go on only if one more iteration of the longest cost so far and
-    the stopped call's last step (one more eHQP) still fit. On a clock that advances one
-    unit per eHQP (every iteration costs the same), a call given ``B`` units does at most
-    ``B`` eHQPs, and uses its budget (at least ``B - 1``: one more would not have fit)."""
-    from sotpy.solvers import _activeset
+def _unit_clock(monkeypatch) -> list[int]:
+    """A thread CPU clock that advances one unit per eHQP of the NumPy twin (every
+    iteration costs the same), read by the kernel and by the solver's entry; returns its
+    counter (add to it to make other work cost time)."""
+    from sotpy.solvers import _activeset, hierarchy
 
     done = [0]
     real_ehqp = _activeset._ehqp
@@ -348,6 +347,16 @@ def test_a_stopped_call_ends_within_its_budget_when_iterations_cost_the_same(mon
 
     monkeypatch.setattr(_activeset, "_ehqp", counted)
     monkeypatch.setattr(_activeset, "time", Clock)
+    monkeypatch.setattr(hierarchy, "time", Clock)  # the call's entry, where the budget starts
+    return done
+
+
+def test_a_stopped_call_ends_within_its_budget_when_iterations_cost_the_same(monkeypatch):
+    """The budget rule: go on only if one more iteration of the longest cost so far and
+    the stopped call's last step (one more eHQP) still fit. On a clock that advances one
+    unit per eHQP (every iteration costs the same), a call given ``B`` units does at most
+    ``B`` eHQPs, and uses its budget (at least ``B - 1``: one more would not have fit)."""
+    done = _unit_clock(monkeypatch)
     levels = next(lv for lv in _hard_stacks(10) if _iterations(lv) >= 9)
     for budget in range(3, 9):
         done[0] = 0
@@ -355,6 +364,30 @@ def test_a_stopped_call_ends_within_its_budget_when_iterations_cost_the_same(mon
         assert res.status == "time" and res.budget_hit
         assert budget - 1 <= done[0] <= budget, (budget, done[0])
         assert res.iterations == done[0]  # every eHQP is counted, the last step's too
+
+
+def test_the_budget_counts_the_work_before_the_kernel(monkeypatch):
+    """The budget is the whole call's, from its entry: when copying the levels costs
+    ``c`` units of the clock, ``B - c`` are left for the eHQPs (and the call, entry to
+    return, still ends within ``B``)."""
+    from sotpy.solvers import hierarchy
+
+    done = _unit_clock(monkeypatch)
+    real_copy = hierarchy.HierarchySolver._copy
+    cost = 3
+
+    def slow_copy(self, levels):
+        done[0] += cost
+        return real_copy(self, levels)
+
+    monkeypatch.setattr(hierarchy.HierarchySolver, "_copy", slow_copy)
+    levels = next(lv for lv in _hard_stacks(10) if _iterations(lv) >= 9)
+    for budget in range(cost + 3, cost + 8):
+        done[0] = 0
+        res = HierarchySolver(jit=False, time_budget=budget, cold_time_budget=None).solve(levels)
+        assert res.status == "time" and res.budget_hit
+        assert budget - 1 <= done[0] <= budget, (budget, done[0])
+        assert res.iterations == done[0] - cost
 
 
 def _iterations(levels) -> int:

@@ -114,11 +114,12 @@ One iteration is one eHQP (the compiled twin restarts it at the first sub-level 
 rows changed, and computes only the sub-levels down to ``own_j`` during phase ``j``: a
 phase reads nothing below; the next phase's first step completes them, which is not
 counted as an iteration since no row changed). The call stops after ``max_iter`` eHQP
-solves, or when the thread's CPU time would exceed ``budget`` with one more iteration of
-the largest cost seen so far (the first counted from the call's start: the input checks,
-the first eHQP and the start check) and then the last step below, which costs about one
-more: the call ends within its budget unless an iteration costs more than every one
-before it, and then by at most that excess.
+solves, or when the thread's CPU time would pass the ``deadline`` (the caller's entry
+time plus its budget: the work before the kernel, such as copying the levels, counts)
+with one more iteration of the largest cost seen so far (the first counted from the
+kernel's start: the input checks, the first eHQP and the start check) and then the last
+step below, which costs about one more: the call ends within its budget unless an
+iteration costs more than every one before it, and then by at most that excess.
 Stopped in phase ``j``: levels ``< j`` are optimal; a last step (one eHQP with the
 current active rows of every level; its target corrects the coordinates of the
 sub-levels from ``held_j`` down and keeps those above, and the step goes from the
@@ -300,10 +301,11 @@ def _check(A, lo, up, info) -> bool:
     return True
 
 
-def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter, budget,
-          x_out, res, ranks, fro, info, wf=None, wi=None) -> None:  # fmt: skip
-    """See the module docstring (the compiled twin has the same arguments; ``wf``, ``wi``:
-    its scratch arrays, unused here)."""
+def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter,
+          deadline, x_out, res, ranks, fro, info, wf=None, wi=None) -> None:  # fmt: skip
+    """See the module docstring; ``deadline`` is the budget's end on the thread CPU clock
+    (:func:`time.thread_time`, s; ``inf``: none). The compiled twin has the same arguments
+    (``wf``, ``wi``: its scratch arrays, unused here)."""
     start = time.thread_time()
     xprev = x_out.copy()
     m = A.shape[0]
@@ -395,7 +397,7 @@ def solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_
                 now = time.thread_time()
                 longest = max(longest, now - checked)
                 checked = now
-                if its >= max_iter or now - start + 2.0 * longest > budget:
+                if its >= max_iter or now + 2.0 * longest > deadline:
                     reason = ITERATIONS if its >= max_iter else TIME
                     break
                 subrows, phis, t = build()

@@ -15,8 +15,9 @@ dozen of them; compiled, one iteration on the Talos stand-and-reach stack costs 
   the phase's own level (the next phase completes it);
 * a row that joins the phase's held rows, when nothing else changed, updates their
   factor in place (:func:`_append_held`) instead of refactoring them;
-* the budget is read from ``clock_gettime(CLOCK_THREAD_CPUTIME_ID)`` (libc, reached through
-  its address as an external symbol), the same clock as :func:`time.thread_time`.
+* the deadline is read from ``clock_gettime(CLOCK_THREAD_CPUTIME_ID)`` (libc, reached
+  through its address as an external symbol), the same clock as :func:`time.thread_time`
+  with which the caller set it.
 
 ``solve`` is ``None`` when compiled kernels are disabled (:mod:`sotpy._jit`) or the
 platform has no thread CPU clock.
@@ -694,7 +695,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
 
     @kernel(fast=True)
     def _solve(A, lo, up, starts, status, attach, lams, rank_tol, eps, dual_tol, max_iter,
-               budget, x_out, res, ranks_out, fro, info, wf, wi):  # pragma: no cover  # fmt: skip
+               deadline, x_out, res, ranks_out, fro, info, wf, wi):  # pragma: no cover  # fmt: skip
         clock = np.zeros(2, dtype=np.int64)
         start = _cpu_time(clock)
         # 0 and 1 as int64 values, not literals: numba compiles a helper once per literal
@@ -887,7 +888,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                     now = _cpu_time(clock)
                     longest = max(longest, now - checked)
                     checked = now
-                    if (stale and its >= max_iter) or now - start + 2.0 * longest > budget:
+                    if (stale and its >= max_iter) or now + 2.0 * longest > deadline:
                         reason = ITERATIONS if stale and its >= max_iter else TIME
                         break
                     if append >= 0:

@@ -60,6 +60,7 @@ See ``docs/solvers.md`` for the details and the measured costs.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from itertools import pairwise
 
@@ -280,7 +281,8 @@ class HierarchySolver:
             ``eps (1 + ||a_i|| max(1, ||x||_inf))``.
         max_iter: iteration budget of a call (equality-hierarchy solves, >= 1).
         time_budget: time budget of a call, in seconds of the calling thread's CPU time
-            (> 0, finite, or ``None`` for none). A call stops before an iteration after
+            from the call's entry (its input checks, copies and new buffers count; > 0,
+            finite, or ``None`` for none). A call stops before an iteration after
             which the last step would not fit (judged by the longest iteration so far):
             it ends within the budget unless an iteration costs more than every one
             before it, and then by at most that excess. Default:
@@ -413,8 +415,9 @@ class HierarchySolver:
         reach). Raises :class:`SolverError` on malformed input, naming the level and
         row; a refused call leaves the solver as it was.
         """
+        entry = time.thread_time()  # the budget counts the input checks and the copy too
         buf, parsed = self._copy(levels)
-        return self._run(buf, parsed, damping)
+        return self._run(buf, parsed, damping, entry)
 
     def stacked(self, sizes: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
         """The solver's own stacked buffers, to write a stack into in place instead of
@@ -447,14 +450,19 @@ class HierarchySolver:
         ``equality=True`` says that every row is an equality ``A_k x = lower_k``
         (``upper`` is not read); else ``lower <= A x <= upper`` row by row.
         """
+        entry = time.thread_time()
         buf = self._buf
         if buf is None:
             raise SolverError("HierarchySolver.solve_stacked: call stacked(sizes) first")
         if equality:
             np.copyto(buf.up, buf.lo)
-        return self._run(buf, None, damping, pair=equality)
+        return self._run(buf, None, damping, entry, pair=equality)
 
-    def _run(self, buf: _Buffers, parsed, damping, pair=False) -> HierarchyResult:
+    def _run(self, buf: _Buffers, parsed, damping, entry: float, pair=False) -> HierarchyResult:
+        """Run the kernel on the buffers, to a deadline on the thread CPU clock: ``entry``
+        (the time at which the call began) plus the budget. What comes before the kernel
+        (a cold call's new buffers, the copy of the levels, the kernel's dispatch) is in
+        the budget, not added to it."""
         p = len(buf.sizes)
         lams = _dampings(self.damping if damping is None else damping, p)
         budget = math.inf if self._time_budget is None else self._time_budget
@@ -462,8 +470,8 @@ class HierarchySolver:
             # the first call, or the first after the level sizes changed
             budget = max(budget, self._cold_time_budget)
         args = (buf.A, buf.lo, buf.up, buf.starts, buf.status, buf.attach, lams, self.rank_tol,
-                self.eps, self.dual_tol, self._max_iter, budget, buf.x, buf.res, buf.ranks,
-                buf.fro, buf.info)  # fmt: skip
+                self.eps, self.dual_tol, self._max_iter, entry + budget, buf.x, buf.res,
+                buf.ranks, buf.fro, buf.info)  # fmt: skip
         if self.jit:
             if buf.wf is None:
                 buf.wf, buf.wi = _activeset_jit.workspace(buf.A.shape[0], buf.A.shape[1], p)
