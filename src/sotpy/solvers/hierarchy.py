@@ -98,6 +98,10 @@ NUMPY_BUDGET_FACTOR = 40.0
 DEFAULT_TIME_BUDGET_NUMPY = DEFAULT_TIME_BUDGET * NUMPY_BUDGET_FACTOR
 DEFAULT_COLD_TIME_BUDGET_NUMPY = DEFAULT_COLD_TIME_BUDGET * NUMPY_BUDGET_FACTOR
 DEFAULT_MAX_ITER = 200
+#: the share of a call's time budget kept for what follows the kernel (the answer copied
+#: out, the result made): the kernel's deadline is ``entry + (1 - RETURN_SHARE) budget``.
+#: Measured on cold calls of 35 to 40 variables: 15 to 50 us, against 100 us kept of 2 ms
+RETURN_SHARE = 0.05
 _DEFAULT = object()
 
 
@@ -460,18 +464,19 @@ class HierarchySolver:
 
     def _run(self, buf: _Buffers, parsed, damping, entry: float, pair=False) -> HierarchyResult:
         """Run the kernel on the buffers, to a deadline on the thread CPU clock: ``entry``
-        (the time at which the call began) plus the budget. What comes before the kernel
-        (a cold call's new buffers, the copy of the levels, the kernel's dispatch) is in
-        the budget, not added to it."""
+        (the time at which the call began) plus the budget less its :data:`RETURN_SHARE`.
+        What comes before the kernel (a cold call's new buffers, the copy of the levels,
+        the kernel's dispatch) and after it is in the budget, not added to it."""
         p = len(buf.sizes)
         lams = _dampings(self.damping if damping is None else damping, p)
         budget = math.inf if self._time_budget is None else self._time_budget
         if not buf.warm and self._cold_time_budget is not None:
             # the first call, or the first after the level sizes changed
             budget = max(budget, self._cold_time_budget)
+        deadline = entry + (1.0 - RETURN_SHARE) * budget
         args = (buf.A, buf.lo, buf.up, buf.starts, buf.status, buf.attach, lams, self.rank_tol,
-                self.eps, self.dual_tol, self._max_iter, entry + budget, buf.x, buf.res,
-                buf.ranks, buf.fro, buf.info)  # fmt: skip
+                self.eps, self.dual_tol, self._max_iter, deadline, buf.x, buf.res, buf.ranks,
+                buf.fro, buf.info)  # fmt: skip
         if self.jit:
             if buf.wf is None:
                 buf.wf, buf.wi = _activeset_jit.workspace(buf.A.shape[0], buf.A.shape[1], p)
