@@ -193,6 +193,43 @@ def test_rate_rows_that_cannot_be_met_are_dropped():
     assert not sim.limited[-1] and abs(sim.torques[-1][j]) <= 0.5 + 1e-9
 
 
+def test_a_tick_without_a_solution_steps_from_the_last_torque_towards_gravity():
+    """The fallback of a tick without a solution (here the QP made to fail): from the
+    torques sent at the tick before, at most the rate bound per tick towards gravity
+    compensation ``S g(q)`` (Pinocchio's generalised gravity, computed here); ``S g``
+    itself with no previous torque or no rate bound."""
+    import pinocchio as pin
+
+    sim = TalosOnFloor("ramp_f")
+    sim.run(60)
+    w, dev = sim.wbc, sim.device
+    w._weighted = lambda *a: (None, False, "forced for the test")
+    data = sim.model.createData()
+    prev = sim.torques[-1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SotpyWarning)  # "no solution", said once
+        for _ in range(5):
+            q, v = dev.state.value.copy(), dev.velocity.value.copy()
+            sol = w.update(q, v, 0.0, DT)
+            assert not sol.found and sol.reason == "forced for the test"
+            g = pin.computeGeneralizedGravity(sim.model, data, q)[6:]
+            expected = prev + np.clip(g - prev, -sim.bound, sim.bound)
+            np.testing.assert_allclose(sol.tau, expected, rtol=0, atol=1e-9)
+            assert np.abs(sol.tau - prev).max() <= sim.bound.max() * (1 + 1e-12)
+            assert np.abs(g - prev).max() > 2 * sim.bound.max()  # the step is the bound's
+            prev = sol.tau.copy()
+            dev.control.value = sol.tau
+            dev.increment(DT)
+        # no rate bound, or no previous torque: gravity compensation at once
+        w.setTorqueRateLimit(np.inf)
+        q, v = dev.state.value.copy(), dev.velocity.value.copy()
+        g = pin.computeGeneralizedGravity(sim.model, data, q)[6:]
+        np.testing.assert_allclose(w.update(q, v, 0.0, DT).tau, g, rtol=0, atol=1e-9)
+        fresh = sim.controller("OneLevelWeighted")
+        fresh._weighted = w._weighted
+        np.testing.assert_allclose(fresh.update(q, v, 0.0, DT).tau, g, rtol=0, atol=1e-9)
+
+
 def test_rate_limit_settings_are_checked():
     w = WholeBodyController(load_robot("talos", prefix="ramp_d").model)
     with pytest.raises(SotpyError, match="torque rate limit"):

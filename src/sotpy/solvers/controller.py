@@ -29,8 +29,9 @@ desired value (default zeros). Each tick (``dt``: the control period, s; the tim
   robots that compensate them below); ``solution`` keeps the full ``tau``;
 * no solution: ``solutionFound`` is False, a ``SotpyWarning`` is emitted once (until a
   solution is found again), and the outputs are the fallback of
-  :mod:`sotpy.solvers.wbc.solver`: gravity compensation ``S g(q)`` (clipped to the
-  torque limits), ``a = 0``, ``f = 0``.
+  :mod:`sotpy.solvers.wbc.solver`: from the last torques sent, a step of at most the
+  torque-rate bound towards gravity compensation ``S g(q)`` (``S g`` itself on the
+  first tick or with no rate bound), clipped to the torque limits; ``a = 0``, ``f = 0``.
 
 For the servos: ``<task>Pose`` (SE3) and ``<task>Velocity`` (6, LOCAL_WORLD_ALIGNED:
 origin velocity and angular velocity, world axes) of each Cartesian task, ``com`` and
@@ -137,7 +138,8 @@ class Controller(Entity):
                 self._warned = True
                 warnings.warn(
                     f"{self.className}({self.name}): no solution at tick {t} ({sol.reason}); "
-                    "output: the fallback (gravity compensation torque)",
+                    "output: the fallback (the last torque, moving towards gravity compensation at"
+                    " the torque-rate bound)",
                     SotpyWarning,
                     stacklevel=2,
                 )

@@ -65,9 +65,11 @@ floating-base robot with no active contact (its base is unconstrained: it falls)
 robot with nothing active (no task, constraint or contact).
 
 No solution (the QP infeasible or failed, the hard level not met, a non-finite
-result): :class:`Solution` with ``found = False`` and the fallback: ``tau = S g(q)``
-(gravity compensation at the current configuration, clipped to the torque limits if a
-torque-limit constraint is set), ``a = 0``, ``f = 0``.
+result): :class:`Solution` with ``found = False`` and the fallback: ``tau = tau_prev +
+clip(S g(q) - tau_prev, -rate dt, rate dt)``, a step from the last torques sent towards
+gravity compensation of at most the torque-rate bound (``S g(q)`` itself on the first
+tick or with no rate bound), clipped to the torque limits if a torque-limit constraint
+is set; ``a = 0``, ``f = 0``.
 """
 
 from __future__ import annotations
@@ -566,8 +568,19 @@ class WholeBodyController:
         )
 
     def _fallback(self, reason: str) -> Solution:
+        """The torques of a tick without a solution: from the last torques sent, a step of
+        at most the torque-rate bound towards gravity compensation ``S g(q)``,
+        ``tau = tau_prev + clip(S g - tau_prev, -rate dt, rate dt)``, within the torque
+        limits (``S g`` itself on the first tick, or with no rate bound). A tick whose
+        solver stopped at its budget thus holds the robot about where the last solution
+        held it, instead of a jump to gravity compensation, which on a standing
+        humanoid ignores the contact forces the legs carry."""
         L, robot = self.layout, self.robot
         tau = robot.S @ robot.g
+        last = self.last
+        if last is not None and last.tau.shape == tau.shape and np.isfinite(last.tau).all():
+            step = self.torque_rate * robot.dt
+            tau = last.tau + np.clip(tau - last.tau, -step, step)
         for c in self.constraints.values():
             if isinstance(c, JointTorqueLimit) and c.state != "inactive":
                 tau = np.clip(tau, c.lower, c.upper)
