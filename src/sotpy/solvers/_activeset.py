@@ -114,8 +114,9 @@ One iteration is one eHQP (the compiled twin restarts it at the first sub-level 
 rows changed, and computes only the sub-levels down to ``own_j`` during phase ``j``: a
 phase reads nothing below; the next phase's first step completes them, which is not
 counted as an iteration since no row changed). The call stops after ``max_iter`` eHQP
-solves, or when the thread's CPU time would pass the ``deadline`` (the caller's entry
-time plus its budget: the work before the kernel, such as copying the levels, counts)
+solves, or when the thread's CPU time would pass the ``deadline`` (set by the caller:
+its entry time plus its budget, less a share kept for the return; the work before the
+kernel, such as copying the levels, counts)
 with one more iteration of the largest cost seen so far (the first counted from the
 kernel's start: the input checks, the first eHQP and the start check) and then the last
 step below, which costs about one more: the call ends within its budget unless an
