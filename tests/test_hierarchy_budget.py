@@ -74,6 +74,68 @@ def test_both_twins_take_the_same_decisions(seed):
     np.testing.assert_allclose(a.x, b.x, atol=1e-8 * (1.0 + np.abs(a.x).max()))
 
 
+def _lapack_pivoted_qr(M):
+    """LAPACK's ``dgeqp3`` of ``M^T`` (scipy): the permutation and ``|diag R|``."""
+    import scipy.linalg
+
+    R, piv = scipy.linalg.qr(M.T, mode="r", pivoting=True)
+    return piv, np.abs(np.diag(R))
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_compiled_pivoted_qr_matches_lapack(seed):
+    """The compiled factor downdates the rows' norms between pivots (as ``dgeqp3``
+    does) instead of summing them again: the same pivots and the same ``R`` as LAPACK's,
+    on full, rank-deficient, wide and tall matrices whose rows are scaled from 1e-3 to
+    1e3, and on rows in pairs of near-copies (once one is a pivot, the other's
+    downdated norm has lost its digits and must be summed again); ``Q`` orthogonal."""
+    if compiled is None:
+        pytest.skip("numba is not installed")
+    from sotpy.solvers import _activeset_jit as kernels
+
+    rng = np.random.default_rng(seed)
+    mk, f = [(32, 23), (12, 38), (23, 32), (20, 20)][seed % 4]
+    if seed < 12:
+        rank = min(mk, f) - (seed % 3) * 3  # full rank, or 3 or 6 short of it
+        M = rng.standard_normal((mk, rank)) @ rng.standard_normal((rank, f))
+        M *= 10.0 ** rng.uniform(-3.0, 3.0, size=(mk, 1))
+    else:  # pairs of near-copies: once a row is a pivot, its copy's norm is all
+        # cancellation unless it is summed again
+        rank = min(mk, f)
+        half = rng.standard_normal((mk - mk // 2, f))
+        near = half[: mk // 2] + 10.0 ** rng.uniform(-8.5, -7.0, size=(mk // 2, 1)) * (
+            rng.standard_normal((mk // 2, f))
+        )
+        M = np.vstack([half, near])[rng.permutation(mk)]
+    piv_ref, diag_ref = _lapack_pivoted_qr(M)
+    W = M.copy()
+    tau, piv = np.zeros(f), np.zeros(mk, dtype=np.int64)
+    kmin = kernels._pivoted_qr(W, mk, f, tau, piv, np.empty(mk), np.empty(mk))
+    assert kmin == min(mk, f)
+    diag = np.abs(np.diag(W[:kmin, :kmin]))
+    # the pivots decide the rank: the same rows in the same order where R is not
+    # round-off (below the rank, the order among round-off rows is arbitrary)
+    scale = diag_ref[0]
+    sure = diag_ref > 1e-11 * scale
+    assert sure.sum() == rank
+    np.testing.assert_array_equal(piv[:rank], piv_ref[:rank])
+    np.testing.assert_allclose(diag[:rank], diag_ref[:rank], rtol=1e-8, atol=1e-13 * scale)
+    assert np.all(diag[rank:] <= 1e-11 * scale)
+    # Q^T M^T P = R: the reflectors (rows of W after the diagonal) reproduce M^T's
+    # permuted columns from R, and keep the norms
+    Q = np.eye(f)
+    for s in reversed(range(kmin)):
+        v = np.zeros(f)
+        v[s] = 1.0
+        v[s + 1 :] = W[s, s + 1 :]
+        Q -= tau[s] * np.outer(v, v @ Q)
+    R = np.zeros((f, mk))
+    for j in range(mk):
+        R[: min(j, kmin - 1) + 1, j] = W[j, : min(j, kmin - 1) + 1]
+    np.testing.assert_allclose(Q.T @ Q, np.eye(f), atol=1e-12)
+    np.testing.assert_allclose(Q @ R, M[piv].T, atol=1e-10 * np.abs(M).max())
+
+
 @pytest.mark.parametrize("seed", [72, 146, 244, 245])
 def test_held_rows_updated_in_place_give_the_refactored_answer(seed):
     """The benchmark's largest stacks (n up to 40, a box first): dozens of box rows join
