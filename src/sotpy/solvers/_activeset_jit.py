@@ -197,9 +197,17 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
 
     @kernel(fast=True)
     def _reflect_basis(M, tau, r, f, Yt, c, n, w):  # pragma: no cover - compiled
-        """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``."""
+        """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``,
+        on columns ``0..n-1`` (the others must be 0 in those rows). Each reflector moves
+        only the rows up to its vector's last nonzero entry."""
         for s in range(r):
-            _reflect_rows(M[s], s, tau[s], f, Yt, c, n, w)
+            v = M[s]
+            hi = s + 1
+            for i in range(f - 1, s, -1):
+                if v[i] != 0.0:
+                    hi = i + 1
+                    break
+            _reflect_rows(v, s, tau[s], hi, Yt, c, n, w)
 
     @kernel(fast=True)
     def _forward(M, r, rhs, u):  # pragma: no cover - compiled
@@ -365,7 +373,16 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                             x[col] += yi * Yt[c + i, col]
                     pend[0] = pend[1] = k
                 else:
-                    _reflect_basis(M, tau[k], r, f, Yt, c, n, w)
+                    ncol = n
+                    if ident:  # Yt = I (c = 0): the reflectors mix only the rows, hence
+                        # the columns, up to the last nonzero entry of their vectors
+                        ncol = r
+                        for s in range(r):
+                            for i in range(f - 1, ncol - 1, -1):
+                                if M[s, i] != 0.0:
+                                    ncol = i + 1
+                                    break
+                    _reflect_basis(M, tau[k], r, f, Yt, c, ncol, w)
                     ident = False
                     changed = True
                     for j in range(r):
