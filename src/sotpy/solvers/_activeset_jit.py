@@ -327,6 +327,13 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 cs[k + 1] = c
                 continue
             M = Mw[r0 : r0 + mk]
+            fq = f  # the columns the factor works on: M is 0 beyond them
+            if ident:  # M = the rows themselves: up to their last nonzero column
+                fq = 0
+                for j in range(mk):
+                    row = act[r0 + j]
+                    if nzp[row + 1] > nzp[row]:
+                        fq = max(fq, nzi[nzp[row + 1] - 1] + 1)
             for j in range(mk):
                 row = act[r0 + j]
                 a = A[row]
@@ -346,7 +353,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                         M[j, i] = _dot(a, Yt[c + i], n)
                 e[r0 + j] = t[row] - _dot(a, x, n)
             pv = piv[r0 : r0 + mk]
-            kmin = _pivoted_qr(M, mk, f, tau[k], pv, w, y)
+            kmin = _pivoted_qr(M, mk, fq, tau[k], pv, w, y)
             thr = rank_tol * phis[k]
             r = 0
             while r < kmin and abs(M[r, r]) > thr:
