@@ -4,7 +4,7 @@ the algorithm is stated in :mod:`._activeset`, whose NumPy ``solve`` this mirror
 Why a second implementation: at these sizes (tens of rows, 20 to 80 variables) a NumPy or
 LAPACK call costs more in fixed overhead than in arithmetic, and an iteration makes a few
 dozen of them; compiled, one iteration on the Talos stand-and-reach stack costs about
-40 us. The differences from the NumPy twin, all in the cost, none in the decisions:
+30 us. The differences from the NumPy twin, all in the cost, none in the decisions:
 
 * the basis is kept transposed (``Yt``: a row per direction), so that every product is a
   dot product of contiguous rows, and the pivoted QR of ``M^T`` works on the rows of
