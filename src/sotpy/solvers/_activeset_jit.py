@@ -196,10 +196,12 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 Yt[c + i, col] -= vi * w[col]
 
     @kernel(fast=True)
-    def _reflect_basis(M, tau, r, f, Yt, c, n, w):  # pragma: no cover - compiled
-        """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``,
-        on columns ``0..n-1`` (the others must be 0 in those rows). Each reflector moves
-        only the rows up to its vector's last nonzero entry."""
+    def _reflect_basis(M, tau, r, f, Yt, c, ncol, w):  # pragma: no cover - compiled
+        """Rows ``c..c+f-1`` of ``Yt`` (``Z^T``) <- ``Q^T Z^T``, ``Q = H_0 ... H_{r-1}``.
+        Each reflector moves only the rows up to its vector's last nonzero entry, and
+        only the columns below ``ncol``, raised to that row: ``ncol = n`` for any basis;
+        ``0`` when these rows are still the identity's (``c = 0``: row ``i`` is 0 beyond
+        column ``i`` until a reflector mixes it with the rows below)."""
         for s in range(r):
             v = M[s]
             hi = s + 1
@@ -207,7 +209,8 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                 if v[i] != 0.0:
                     hi = i + 1
                     break
-            _reflect_rows(v, s, tau[s], hi, Yt, c, n, w)
+            ncol = max(ncol, c + hi)
+            _reflect_rows(v, s, tau[s], hi, Yt, c, ncol, w)
 
     @kernel(fast=True)
     def _forward(M, r, rhs, u):  # pragma: no cover - compiled
@@ -380,16 +383,7 @@ if _clock_gettime is not None:  # pragma: no branch - the environment decides
                             x[col] += yi * Yt[c + i, col]
                     pend[0] = pend[1] = k
                 else:
-                    ncol = n
-                    if ident:  # Yt = I (c = 0): the reflectors mix only the rows, hence
-                        # the columns, up to the last nonzero entry of their vectors
-                        ncol = r
-                        for s in range(r):
-                            for i in range(f - 1, ncol - 1, -1):
-                                if M[s, i] != 0.0:
-                                    ncol = i + 1
-                                    break
-                    _reflect_basis(M, tau[k], r, f, Yt, c, ncol, w)
+                    _reflect_basis(M, tau[k], r, f, Yt, c, 0 if ident else n, w)
                     ident = False
                     changed = True
                     for j in range(r):
