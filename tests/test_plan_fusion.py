@@ -26,17 +26,18 @@ import pytest
 
 from sotpy.dynamics import load_robot
 from sotpy.errors import CommandError, SotpyError, SotpyWarning, UnpluggedError
-from sotpy.graph import DOUBLE, VECTOR, Entity, Input, Output, Plan, compilePlan, plug, pool
+from sotpy.graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, Plan, compilePlan, plug, pool
 from sotpy.graph.tracer import Tracer
 from sotpy.solvers import SOT
 from sotpy.tasks import FeatureGeneric, FeaturePose, FeaturePosture, Task, TaskInequality
 from sotpy.tasks import _rowkernels as rk
+from sotpy.tasks.rows import RowProgram
 
 DT = 0.001
 TICKS = 50
 ON, OFF = "fusedX_", "plainX_"  # entity name prefixes of the two graphs
 
-needs_kernels = pytest.mark.skipif(rk.pose_rows is None, reason="task fusion needs numba")
+needs_kernels = pytest.mark.skipif(rk.write_rows is None, reason="task fusion needs numba")
 
 
 # -- graph level ----------------------------------------------------------------------
@@ -602,14 +603,40 @@ def test_mixed_stack_with_inequalities_and_unfused_tasks():
     assert on.sot.getTaskFusion() is True
 
 
+class Float32Jacobian(Entity):
+    """A matrix output handing out ``value`` as float32 (no input coerces it)."""
+
+    @Output(MATRIX)
+    def out(self):
+        return self.value.astype(np.float32)
+
+
 @needs_kernels
-def test_kernels_refusing_a_fortran_jacobian_fall_back_with_a_warning(bench_sot, scenes):
+def test_fortran_jacobians_stay_on_the_fused_path(bench_sot, scenes):
+    """A Jacobian in Fortran order (a user's entity, Eigen's own layout): the kernel
+    takes it as it is (no warning, no fallback) and gives the control of the signals."""
     on, off = build_pair(bench_sot, scenes("talos"))
     tick_both(on, off, 3)
     for p in (ON, OFF):
         f = entity(f"feature{p}com")
         f.jacobianIN.value = np.asfortranarray(f.jacobianIN.value)
         assert f.jacobianIN.value.flags.f_contiguous
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SotpyWarning)
+        tick_both(on, off, 5)
+    assert on.sot.getTaskFusion() is True
+    assert entity(f"{ON}taskContactCom").task not in on.device._controlPlan.steps
+
+
+@needs_kernels
+def test_kernel_refusing_a_float32_jacobian_falls_back_with_a_warning(bench_sot, scenes):
+    on, off = build_pair(bench_sot, scenes("talos"))
+    tick_both(on, off, 3)
+    for p in (ON, OFF):
+        src = Float32Jacobian(p + "f32")
+        src.value = np.asarray(entity(f"{p}talos_dynamic").Jcom.value)
+        plug(src.out, entity(f"feature{p}com").jacobianIN)
+    assert entity(f"feature{ON}com").jacobianIN.value.dtype == np.float32
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         tick_both(on, off, 5)
@@ -639,7 +666,7 @@ def test_read_only_inputs_stay_on_the_fused_path(bench_sot, scenes):
 
 
 def test_set_task_fusion_needs_the_kernels(monkeypatch):
-    monkeypatch.setattr(rk, "pose_rows", None)
+    monkeypatch.setattr(rk, "write_rows", None)
     r = load_robot("nao", prefix="nokernels")
     sot = SOT("sot", r.dynamic)
     assert sot.getTaskFusion() is False
@@ -722,9 +749,10 @@ def test_a_task_changing_size_goes_through_the_levels_once(bench_sot, scenes):
 
 @needs_kernels
 def test_new_limits_are_seen_in_the_same_tick(bench_sot, scenes):
-    """Velocity limits replaced by a new array while running: the in-place rows were
-    computed from the previous ones, so that tick goes through the levels (which
-    recompute them); the control respects the new limits from that tick on."""
+    """Velocity limits replaced by a new array while running: the row program makes
+    the limit rows again from the new array in the same tick (still in place: the
+    same joints are limited), and the control respects the new limits from that tick
+    on."""
     on, off = build_pair(bench_sot, scenes("talos"))
     vmax = np.asarray(on.sot.upperVl.value)
     for c in (on, off):
@@ -737,19 +765,34 @@ def test_new_limits_are_seen_in_the_same_tick(bench_sot, scenes):
     for c in (on, off):
         c.sot.upperVl.value = slow  # a new array, the same plan
     tick_both(on, off, 5)
-    assert calls == {"solve": 2, "solve_stacked": 8}
+    assert calls == {"solve": 1, "solve_stacked": 9}
+    assert on.sot._limits[2] is on.sot.upperVl.value
     x = on.sot.lastResult.x
     assert np.all(np.abs(x[iv]) <= slow[iv] + 1e-9)
     assert np.abs(x[iv]).max() > 0.9 * slow[iv].min()  # the new limits are active
+    # one joint without a velocity limit nor position limits: one row fewer, through
+    # the levels once
+    unlimited = slow.copy()
+    unlimited[iv[0]] = np.inf
+    for c in (on, off):
+        lower = np.asarray(c.sot.lowerJl.value).copy()
+        upper = np.asarray(c.sot.upperJl.value).copy()
+        lower[on.sot._iq[0]], upper[on.sot._iq[0]] = -np.inf, np.inf
+        c.sot.lowerJl.value, c.sot.upperJl.value = lower, upper
+        c.sot.upperVl.value = unlimited
+    tick_both(on, off, 5)
+    assert calls == {"solve": 2, "solve_stacked": 13}
+    assert on.sot._inPlace[1][0] == on.sot.nv - 6 - 1
 
 
 @needs_kernels
 def test_limit_rows_kernel_is_the_limit_level_bit_for_bit():
-    """The joint-limit level computed in place (``_rowkernels.limit_bounds``) against
-    ``SOT._limitLevel``: random configurations inside and beyond the limits, joints
-    without a velocity limit or a position limit, a NaN configuration entry."""
+    """The joint-limit level written by the row program (a ``LIMITS`` operation)
+    against ``SOT._limitLevel``: random configurations inside and beyond the limits,
+    joints without a velocity limit or a position limit, a NaN configuration entry."""
     r = load_robot("talos", prefix="limitsX_")
     sot = SOT("limitsX_sot", r.dynamic)
+    program = RowProgram([sot._limitsOp()])
     rng = np.random.default_rng(7)
     lower = np.asarray(r.dynamic.lowerJl.value).copy()
     upper = np.asarray(r.dynamic.upperJl.value).copy()
@@ -763,15 +806,22 @@ def test_limit_rows_kernel_is_the_limit_level_bit_for_bit():
             q[12] = np.nan
         dt = float(rng.uniform(1e-4, 1e-2))
         A, lo, hi = sot._limitLevel(q, lower, upper, vmax, dt)
-        cache = sot._limits
         m = A.shape[0]
+        A2 = np.full((m + 3, sot.nv), 7.0)
         lo2, hi2 = np.full(m + 3, 7.0), np.full(m + 3, 7.0)
-        rk.limit_bounds(q, cache[3], cache[4], cache[5], cache[6], dt, lo2, hi2, 2)
-        np.testing.assert_array_equal(lo2[2 : m + 2], lo)
-        np.testing.assert_array_equal(hi2[2 : m + 2], hi)
-        assert lo2[0] == lo2[1] == lo2[-1] == 7.0  # nothing written outside its rows
+        ends = np.zeros(1, dtype=np.int64)
+        assert program.run((q, lower, upper, vmax, dt), A2, lo2, hi2, ends, False) == m
+        assert ends[0] == m
+        np.testing.assert_array_equal(A2[:m], A)
+        np.testing.assert_array_equal(lo2[:m], lo)
+        np.testing.assert_array_equal(hi2[:m], hi)
+        assert lo2[m] == hi2[m] == 7.0 and (A2[m:] == 7.0).all()  # nothing else written
         if trial == 0:
             assert np.isnan(lo).any()
+        # the same rows checked against the level's known end, or refused when it moved
+        assert program.run((q, lower, upper, vmax, dt), A2, lo2, hi2, ends, True) == m
+        ends[0] = m + 1
+        assert program.run((q, lower, upper, vmax, dt), A2, lo2, hi2, ends, True) == rk.RESIZED
 
 
 # -- the tutorial's graph: an inequality task (feet + balance polygon) fused ----------------

@@ -1,14 +1,16 @@
 """Task rows written straight into a solver's buffer (``sotpy.tasks.rows`` and the
-kernels of ``sotpy.tasks._rowkernels``): the compiled ``log3``/``Jlog3`` against
-Pinocchio, an independent series and finite differences; every feature's row writer
-against the feature's own ``jacobian`` and ``error`` signals on random inputs; the
-task's writer against ``task.jacobian`` and ``task.task``; when writers decline
-(``-1``) or are not made (``None``); ``BufferFull``.
+kernel of ``sotpy.tasks._rowkernels``): the compiled ``log3``/``Jlog3`` against
+Pinocchio, an independent series and finite differences; every feature's row
+operation against the feature's own ``jacobian`` and ``error`` signals on random
+inputs; the task's operations against ``task.jacobian`` and ``task.task`` (or
+``lower``/``upper``); when a program refuses a tick (``REFUSED``) or an operation is
+not made (``None``); ``NO_ROOM``; a program cut into several kernel calls.
 
-A writer is called as the SOT calls it: ``write(values, offset, A, b, r, gain)`` with
-``values[offset:]`` the values of ``writer.sources``; rows go to ``A[r:r+k]`` and
-``b[r:r+k]``. The buffers are filled with NaN first, so a write outside those rows
-shows.
+A program is run as the SOT runs it: ``RowProgram(ops).run(values, A, lo, up, ends,
+fixed, offset)`` with ``values[offset:]`` the values of the operations' sources; rows
+go to ``A``, ``lo`` and ``up`` from row 0. A feature's operation alone leaves its
+error ``e`` in ``lo``; a task's operation turns it into ``-gain e``. The buffers are
+filled with NaN first, so a write outside those rows shows.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sotpy.errors import SignalTypeError
+from sotpy.errors import SignalTypeError, SotpyError
 from sotpy.graph import MATRIX, Entity, Output, plug
 from sotpy.tasks import (
     FeatureGeneric,
@@ -29,11 +31,12 @@ from sotpy.tasks import (
     FeatureVisualPoint,
     Flags,
     Task,
+    TaskInequality,
 )
 from sotpy.tasks import _rowkernels as rk
-from sotpy.tasks.rows import BufferFull, RowWriter
+from sotpy.tasks.rows import RowOp, RowProgram
 
-pytestmark = pytest.mark.skipif(rk.pose_rows is None, reason="the row kernels need numba")
+pytestmark = pytest.mark.skipif(rk.write_rows is None, reason="the row kernel needs numba")
 
 NV = 7
 JUNK = ("junk", None)  # values before the writer's own: the offset must skip them
@@ -171,34 +174,46 @@ def test_jlog3_is_the_derivative_of_log3_along_a_right_perturbation():
         np.testing.assert_allclose(rk.jlog3(R), fd, rtol=0, atol=1e-7)
 
 
-# -- feature writers ------------------------------------------------------------------
-def values_of(w: RowWriter) -> tuple:
-    return tuple(s.value for s in w.sources)
+# -- feature operations ---------------------------------------------------------------
+KIND_NAMES = ("POSE", "GENERIC", "POSTURE", "ROWS", "EQUALITY", "INEQUALITY", "LIMITS", "LEVEL")
 
 
-def made_by(w: RowWriter) -> str:
-    """Which writer: ``"FeaturePose"``, ``"FeatureGeneric"``, ``"FeaturePosture"`` (a
-    kernel's), ``"callbackWriter"`` (the feature's own callbacks) or ``"Task"``."""
-    return w.write.__qualname__.split(".")[0]
+def values_of(ops: RowOp | list[RowOp]) -> tuple:
+    ops = ops if isinstance(ops, list) else [ops]
+    return tuple(s.value for op in ops for s in op.sources)
 
 
-def check_writer(feature, gain: float, r: int = 3, extra: int = 2, nv: int = NV) -> int:
-    """Write the feature's rows at row ``r`` of NaN buffers; they must equal its
-    signals, and nothing else may be written."""
-    w = feature._rowWriter()
-    assert w is not None
+def made_by(op: RowOp) -> str:
+    """The kernel's operation: ``"POSE"``, ``"GENERIC"``, ``"POSTURE"`` (a formula of
+    the kernel) or ``"ROWS"`` (the feature's own callbacks)."""
+    return KIND_NAMES[op.kind]
+
+
+def run_ops(ops, nv: int, rows: int = 40, values=None, levels: int = 1):
+    """Run ``ops`` (an operation or a list) into NaN buffers of ``rows x nv``, their
+    values after two junk ones (the offset must skip them); ``(r, A, lo, up, ends)``."""
+    ops = ops if isinstance(ops, list) else [ops]
+    A, lo, up = np.full((rows, nv), np.nan), np.full(rows, np.nan), np.full(rows, np.nan)
+    ends = np.full(levels, -7, dtype=np.int64)
+    v = values if values is not None else values_of(ops)
+    r = RowProgram(ops).run((*JUNK, *v), A, lo, up, ends, False, len(JUNK))
+    return r, A, lo, up, ends
+
+
+def check_writer(feature, nv: int = NV, extra: int = 2) -> int:
+    """Run the feature's operation: its rows must equal its signals (``J`` in ``A``,
+    ``e`` in ``lo``), and nothing else may be written."""
+    op = feature._rowOp()
+    assert op is not None
     J = feature.jacobian.value
     e = feature.error.value
     m = feature.dim.value
     assert J.shape == (m, nv) and e.shape == (m,)
-    A = np.full((r + m + extra, nv), np.nan)
-    b = np.full(r + m + extra, np.nan)
-    k = w.write((*JUNK, *values_of(w)), len(JUNK), A, b, r, gain)
+    k, A, lo, up, _ = run_ops(op, nv, rows=m + extra)
     assert k == m
-    np.testing.assert_allclose(A[r : r + k], J, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(b[r : r + k], -gain * e, rtol=0, atol=1e-12)
-    assert np.isnan(A[:r]).all() and np.isnan(A[r + k :]).all()
-    assert np.isnan(b[:r]).all() and np.isnan(b[r + k :]).all()
+    np.testing.assert_allclose(A[:k], J, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lo[:k], e, rtol=0, atol=1e-12)
+    assert np.isnan(A[k:]).all() and np.isnan(lo[k:]).all() and np.isnan(up).all()
     return k
 
 
@@ -219,12 +234,11 @@ POSE_SELECTIONS = ["111111", "111000", "000111", "101010", "000011", "010000"]
 
 @pytest.mark.parametrize("selec", POSE_SELECTIONS)
 @pytest.mark.parametrize("seed", range(3))
-def test_feature_pose_writer_gives_its_jacobian_and_error(selec, seed):
+def test_feature_pose_operation_gives_its_jacobian_and_error(selec, seed):
     rng = np.random.default_rng(seed)
     f = pose_feature(FeaturePose, "fpose", rng, selec)
-    assert made_by(f._rowWriter()) == "FeaturePose"
-    gain = float(rng.uniform(0.1, 50.0))
-    k = check_writer(f, gain)
+    assert made_by(f._rowOp()) == "POSE"
+    k = check_writer(f)
     assert k == selec.count("1")
     # the error, independently: (R*^T (p - p*), log3(R*^T R)) on the selected rows
     M, Md = f.position.value, f.reference.value
@@ -236,21 +250,20 @@ def test_feature_pose_writer_gives_its_jacobian_and_error(selec, seed):
 
 
 @pytest.mark.parametrize("theta", [0.0, 1e-8, 1e-3, math.pi - 1e-6, math.pi - 1e-3])
-def test_feature_pose_writer_at_small_and_near_pi_relative_rotations(theta):
+def test_feature_pose_operation_at_small_and_near_pi_relative_rotations(theta):
     rng = np.random.default_rng(42)
     Mdes = pin.SE3(random_rotation(rng), rng.standard_normal(3))
     f = pose_feature(FeaturePose, "fpose", rng, "111111", Mdes=Mdes)
     rel = pin.SE3(pin.exp3(theta * unit(rng)), 0.1 * rng.standard_normal(3))
     f.position.value = Mdes * rel
     # Pinocchio's Jlog3 near zero carries its own ~1e-10 (see the tiny-angle test)
-    w = f._rowWriter()
-    A, b = np.full((6, NV), np.nan), np.full(6, np.nan)
-    assert w.write(values_of(w), 0, A, b, 0, 2.0) == 6
+    r, A, lo, _, _ = run_ops(f._rowOp(), NV, rows=6)
+    assert r == 6
     np.testing.assert_allclose(A, f.jacobian.value, rtol=0, atol=1e-8)
-    np.testing.assert_allclose(b, -2.0 * f.error.value, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(lo, f.error.value, rtol=0, atol=1e-9)
 
 
-def test_feature_pose_writer_reads_the_sources_of_its_jacobian():
+def test_feature_pose_operation_reads_the_sources_of_its_jacobian():
     class ConstJacobian(Entity):
         @Output(MATRIX, timeDependent=False)
         def out(self):
@@ -261,32 +274,32 @@ def test_feature_pose_writer_reads_the_sources_of_its_jacobian():
     src = ConstJacobian("src")
     src.J = rng.standard_normal((6, NV))
     plug(src.out, f.Jq)
-    w = f._rowWriter()
+    op = f._rowOp()
     # the holders: a plugged input is replaced by the output it follows
-    assert w.sources == (f.selec, f.position, f.reference, src.out)
-    check_writer(f, 1.5)
-    # the writer reads the values it is given, not the signals: another Jacobian
-    values = list(values_of(w))
+    assert op.sources == (f.selec, f.position, f.reference, src.out)
+    check_writer(f)
+    # the operation reads the values it is given, not the signals: another Jacobian
+    values = list(values_of(op))
     values[3] = 2.0 * values[3]
-    A, b = np.full((4, NV), np.nan), np.full(4, np.nan)
-    assert w.write(values, 0, A, b, 0, 1.5) == 4
+    r, A, _, _, _ = run_ops(op, NV, rows=4, values=values)
+    assert r == 4
     np.testing.assert_allclose(A, 2.0 * f.jacobian.value, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("selec", POSE_SELECTIONS)
-def test_feature_pose_se3_uses_its_callbacks_as_writer(selec):
+def test_feature_pose_se3_uses_its_callbacks(selec):
     rng = np.random.default_rng(9)
     f = pose_feature(FeaturePoseSE3, "fse3", rng, selec)
-    w = f._rowWriter()
-    assert made_by(w) == "callbackWriter"
-    # the generic writer: the error's then the jacobian's sources
-    assert w.sources == (*f.error.dependencies, *f.jacobian.dependencies)
-    check_writer(f, 0.7)
+    op = f._rowOp()
+    assert made_by(op) == "ROWS"
+    # the callbacks' operation: the error's then the jacobian's sources
+    assert op.sources == (*f.error.dependencies, *f.jacobian.dependencies)
+    check_writer(f)
 
 
 @pytest.mark.parametrize("selec", [True, "10110", "00001", "11111", "0"])
 @pytest.mark.parametrize("reference", [False, True])
-def test_feature_generic_writer_gives_its_jacobian_and_error(selec, reference):
+def test_feature_generic_operation_gives_its_jacobian_and_error(selec, reference):
     rng = np.random.default_rng(17)
     m = 5
     f = FeatureGeneric("fgen")
@@ -297,10 +310,10 @@ def test_feature_generic_writer_gives_its_jacobian_and_error(selec, reference):
         ref = FeatureGeneric("fgenDes")
         ref.errorIN.value = rng.standard_normal(m)
         f.setReference(ref)
-    w = f._rowWriter()
-    assert made_by(w) == "FeatureGeneric"
-    assert len(w) == (3 if reference else 2) + 2
-    k = check_writer(f, 3.25)
+    op = f._rowOp()
+    assert made_by(op) == "GENERIC"
+    assert len(op) == (3 if reference else 2) + 2
+    k = check_writer(f)
     assert k == Flags(selec).count(m)
     if reference:  # the difference, independently
         e = f.errorIN.value - ref.errorIN.value
@@ -308,7 +321,7 @@ def test_feature_generic_writer_gives_its_jacobian_and_error(selec, reference):
         np.testing.assert_allclose(f.error.value, e if rows is None else e[rows], atol=0)
 
 
-def test_feature_generic_writer_declines_what_its_callbacks_refuse():
+def test_feature_generic_operation_refuses_what_its_callbacks_refuse():
     rng = np.random.default_rng(1)
     f = FeatureGeneric("fgen")
     f.errorIN.value = rng.standard_normal(3)
@@ -316,32 +329,33 @@ def test_feature_generic_writer_declines_what_its_callbacks_refuse():
     ref = FeatureGeneric("fgenDes")
     ref.errorIN.value = rng.standard_normal(2)  # wrong size
     f.setReference(ref)
-    w = f._rowWriter()
-    A, b = np.full((6, NV), np.nan), np.full(6, np.nan)
-    assert w.write(values_of(w), 0, A, b, 0, 1.0) == -1
+    op = f._rowOp()
+    r, A, lo, _, _ = run_ops(op, NV, rows=6)
+    assert r == rk.REFUSED
+    assert np.isnan(A).all() and np.isnan(lo).all()  # nothing written when refusing
     with pytest.raises(SignalTypeError, match="fgenDes"):
         f.error.value  # noqa: B018
     ref.errorIN.value = rng.standard_normal(3)
+    assert run_ops(op, NV, rows=6)[0] == 3
     # a Jacobian of another width than the buffer, or of other rows than the error
-    assert w.write(values_of(w), 0, np.full((6, NV + 1), np.nan), b, 0, 1.0) == -1
+    assert run_ops(op, NV + 1, rows=6)[0] == rk.REFUSED
     f.jacobianIN.value = rng.standard_normal((4, NV))
-    assert w.write(values_of(w), 0, A, b, 0, 1.0) == -1
-    assert np.isnan(A).all() and np.isnan(b).all()  # nothing written when declining
+    assert run_ops(op, NV, rows=6)[0] == rk.REFUSED
 
 
-def test_callback_writer_calls_the_callback_in_force():
+def test_callback_operation_calls_the_callback_in_force():
     rng = np.random.default_rng(2)
     f = FeatureGeneric("fgen")
     f.errorIN.value = rng.standard_normal(3)
     f.jacobianIN.value = rng.standard_normal((3, NV))
     f.error.setFunction(lambda selec, s: 2.0 * s + 1.0)
     # not the kernel's: the error is no longer FeatureGeneric's
-    assert made_by(f._rowWriter()) == "callbackWriter"
-    check_writer(f, 0.5)
+    assert made_by(f._rowOp()) == "ROWS"
+    check_writer(f)
     np.testing.assert_allclose(f.error.value, 2.0 * f.errorIN.value + 1.0)
 
 
-def test_feature_visual_point_uses_its_callbacks_as_writer():
+def test_feature_visual_point_uses_its_callbacks():
     rng = np.random.default_rng(4)
     f = FeatureVisualPoint("fvp")
     f.xy.value = [0.1, -0.2]
@@ -350,7 +364,8 @@ def test_feature_visual_point_uses_its_callbacks_as_writer():
     f.xyRef.value = [0.05, 0.0]
     for selec in (True, "01"):
         f.selec.value = selec
-        check_writer(f, 1.2)
+        assert made_by(f._rowOp()) == "ROWS"
+        check_writer(f)
 
 
 # -- FeaturePosture -------------------------------------------------------------------
@@ -380,12 +395,12 @@ def posture_feature(model, rng, name="fposture"):
     return f
 
 
-def test_feature_posture_writer_default_selection_uses_the_kernel(humanoid):
+def test_feature_posture_operation_default_selection_uses_the_kernel(humanoid):
     rng = np.random.default_rng(8)
     f = posture_feature(humanoid, rng)
-    assert made_by(f._rowWriter()) == "FeaturePosture"
+    assert made_by(f._rowOp()) == "POSTURE"
     assert f._postureIndex(f.selec.value) is not None  # one-DoF joints only: the kernel
-    k = check_writer(f, 0.9, nv=humanoid.nv)
+    k = check_writer(f, nv=humanoid.nv)
     assert k == humanoid.nv - 6  # the free flyer excluded
     # the rows of the identity at the joints' DoFs
     J = f.jacobian.value
@@ -396,22 +411,22 @@ def test_feature_posture_writer_default_selection_uses_the_kernel(humanoid):
     "dofs, kernel",
     [([7, 10, 33], True), ([6], True), ([0, 4, 12], False), ([3, 4, 5], False)],
 )
-def test_feature_posture_writer_with_a_few_dofs(humanoid, dofs, kernel):
+def test_feature_posture_operation_with_a_few_dofs(humanoid, dofs, kernel):
     rng = np.random.default_rng(len(dofs) + dofs[0])
     f = posture_feature(humanoid, rng)
     f.selec.value = Flags([i in dofs for i in range(humanoid.nv)])
     # a free flyer's DoF: Pinocchio's dDifference block through the callbacks
     assert (f._postureIndex(f.selec.value) is not None) == kernel
-    assert check_writer(f, 2.5, nv=humanoid.nv) == len(dofs)
+    assert check_writer(f, nv=humanoid.nv) == len(dofs)
 
 
 @pytest.mark.parametrize("selec, kernel", [(True, False), ("101", True), ("010", False)])
-def test_feature_posture_writer_with_a_continuous_joint(continuous, selec, kernel):
+def test_feature_posture_operation_with_a_continuous_joint(continuous, selec, kernel):
     rng = np.random.default_rng(21)
     f = posture_feature(continuous, rng)
     f.selec.value = selec
     assert (f._postureIndex(f.selec.value) is not None) == kernel
-    k = check_writer(f, 1.75, nv=continuous.nv)
+    k = check_writer(f, nv=continuous.nv)
     assert k == Flags(selec).count(3)
     # the continuous joint's error: the angle between the two, in (-pi, pi]
     if selec is True:
@@ -421,37 +436,36 @@ def test_feature_posture_writer_with_a_continuous_joint(continuous, selec, kerne
         assert f.error.value[1] == pytest.approx(angle, abs=1e-12)
 
 
-def test_feature_posture_writer_raises_the_callbacks_errors(humanoid):
+def test_feature_posture_operation_raises_the_callbacks_errors(humanoid):
     rng = np.random.default_rng(0)
     f = posture_feature(humanoid, rng)
-    w = f._rowWriter()
-    A, b = np.full((40, humanoid.nv), np.nan), np.full(40, np.nan)
+    op = f._rowOp()
     f.posture.value = np.zeros(5)
     with pytest.raises(SignalTypeError) as fused:
-        w.write(values_of(w), 0, A, b, 0, 1.0)
+        run_ops(op, humanoid.nv)
     with pytest.raises(SignalTypeError) as plain:
         f.error.value  # noqa: B018
     assert str(fused.value) == str(plain.value)
     assert "fposture" in str(fused.value)
     f.posture.value = pin.neutral(humanoid)
-    assert w.write(values_of(w), 0, A, b, 0, 1.0) == humanoid.nv - 6
-    # the buffer of another width: declined
-    assert w.write(values_of(w), 0, np.full((40, 3), np.nan), b, 0, 1.0) == -1
+    assert run_ops(op, humanoid.nv)[0] == humanoid.nv - 6
+    # a buffer of another width: the callbacks' rows, which do not fit it
+    assert run_ops(op, 3)[0] == rk.REFUSED
 
 
-# -- writers not made -----------------------------------------------------------------
-def test_no_writer_for_outputs_not_computed_by_a_callback_every_tick():
+# -- operations not made --------------------------------------------------------------
+def test_no_operation_for_outputs_not_computed_by_a_callback_every_tick():
     rng = np.random.default_rng(6)
     f = pose_feature(FeaturePose, "fpose", rng, "111111")
-    assert f._rowWriter() is not None
+    assert f._rowOp() is not None
     f.jacobian.setPeriod(2)
-    assert f._rowWriter() is None
+    assert f._rowOp() is None
     f.jacobian.setPeriod(1)
-    assert f._rowWriter() is not None
+    assert f._rowOp() is not None
     f.error.value = np.zeros(6)  # a constant
-    assert f._rowWriter() is None
+    assert f._rowOp() is None
     f.error.resetCallback()
-    assert f._rowWriter() is not None
+    assert f._rowOp() is not None
 
 
 # -- Task -----------------------------------------------------------------------------
@@ -480,83 +494,79 @@ def three_feature_task(humanoid, rng, name="task"):
     return t, (fp, fg, fq)
 
 
-def write_task(t, nv, r=2, rows=None, gain=123.0, values=None):
-    w = t._rowWriter()
-    assert w is not None
-    n = rows if rows is not None else r + 12
-    A, b = np.full((n, nv), np.nan), np.full(n, np.nan)
-    v = values if values is not None else values_of(w)
-    k = w.write((*JUNK, *v), len(JUNK), A, b, r, gain)
-    return k, A, b
+def write_task(t, nv, rows=14, values=None):
+    """Run the task's operations (its features', then its own) into NaN buffers."""
+    ops = t._rowOps()
+    assert ops is not None
+    r, A, lo, up, ends = run_ops(ops, nv, rows=rows, values=values)
+    if r >= 0:
+        assert ends[0] == r  # the task closes its level
+    return r, A, lo, up
 
 
-def test_task_writer_gives_the_task_jacobian_and_target(humanoid):
+def test_task_operations_give_the_task_jacobian_and_target(humanoid):
     rng = np.random.default_rng(30)
     t, features = three_feature_task(humanoid, rng)
     m = sum(f.dim.value for f in features)
     assert m == 3 + 2 + 3
-    r = 2
-    # the gain argument is the SOT's placeholder: the task writes -controlGain e
-    k, A, b = write_task(t, humanoid.nv, r=r, gain=123.0)
+    k, A, lo, up = write_task(t, humanoid.nv)
     assert k == m
-    np.testing.assert_allclose(A[r : r + k], t.jacobian.value, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(b[r : r + k], t.task.value, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(b[r : r + k], -4.0 * t.error.value, rtol=0, atol=1e-12)
-    assert np.isnan(A[:r]).all() and np.isnan(A[r + k :]).all()
-    assert np.isnan(b[:r]).all() and np.isnan(b[r + k :]).all()
-    # the sources: controlSelec, controlGain, then each feature's
-    w = t._rowWriter()
-    assert w.sources[:2] == (t.controlSelec, t.controlGain)
-    assert len(w) == 2 + sum(len(f._rowWriter()) for f in features)
+    np.testing.assert_allclose(A[:k], t.jacobian.value, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lo[:k], t.task.value, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lo[:k], -4.0 * t.error.value, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(up[:k], lo[:k])  # an equality: both bounds
+    assert np.isnan(A[k:]).all() and np.isnan(lo[k:]).all() and np.isnan(up[k:]).all()
+    # the operations: each feature's, then the task's own on controlSelec, controlGain
+    ops = t._rowOps()
+    assert [made_by(op) for op in ops] == ["POSE", "GENERIC", "POSTURE", "EQUALITY"]
+    assert ops[-1].sources == (t.controlSelec, t.controlGain)
 
 
-def test_task_writer_zeroes_the_unselected_columns(humanoid):
+def test_task_operations_zero_the_unselected_columns(humanoid):
     rng = np.random.default_rng(31)
     t, _ = three_feature_task(humanoid, rng)
     nv = humanoid.nv
     cols = [i % 3 != 0 for i in range(nv)]
     t.controlSelec.value = cols
-    k, A, b = write_task(t, nv, r=0)
+    k, A, lo, _ = write_task(t, nv)
     J = t.jacobian.value
     assert not J[:, ~np.array(cols)].any()
     np.testing.assert_allclose(A[:k], J, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(b[:k], t.task.value, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lo[:k], t.task.value, rtol=0, atol=1e-12)
     assert not A[:k, ~np.array(cols)].any()
 
 
-def test_task_writer_is_not_made_when_the_task_signals_must_be_read(humanoid):
+def test_task_operations_are_not_made_when_the_task_signals_must_be_read(humanoid):
     rng = np.random.default_rng(32)
     t, (_, fg, _) = three_feature_task(humanoid, rng)
-    assert t._rowWriter() is not None
+    assert t._rowOps() is not None
     t.setWithDerivative(True)  # the feed-forward reads errordot
-    assert t._rowWriter() is None
+    assert t._rowOps() is None
     t.setWithDerivative(False)
-    assert t._rowWriter() is not None
+    assert t._rowOps() is not None
     t.task.value = np.zeros(8)  # the target set to a constant
-    assert t._rowWriter() is None
+    assert t._rowOps() is None
     t.task.resetCallback()
-    assert t._rowWriter() is not None
+    assert t._rowOps() is not None
     fg.jacobian.setPeriod(2)  # a feature computed every other tick
-    assert t._rowWriter() is None
+    assert t._rowOps() is None
     fg.jacobian.setPeriod(1)
-    assert t._rowWriter() is not None
+    assert t._rowOps() is not None
     t.jacobian.setPeriod(3)
-    assert t._rowWriter() is None
+    assert t._rowOps() is None
     t.jacobian.setPeriod(1)
     t.error.setFunction(lambda *errors: np.concatenate(errors))  # another callback
-    assert t._rowWriter() is None
-    assert Task("empty")._rowWriter() is None
+    assert t._rowOps() is None
+    assert Task("empty")._rowOps() is None
 
 
 @pytest.mark.parametrize("gain", [-1.0, math.nan, math.inf])
-def test_task_writer_declines_a_gain_out_of_range(humanoid, gain):
+def test_task_operations_refuse_a_gain_out_of_range(humanoid, gain):
     rng = np.random.default_rng(33)
     t, _ = three_feature_task(humanoid, rng)
-    values = list(values_of(t._rowWriter()))
-    values[1] = gain  # controlGain's value (a NaN constant is refused by the signal)
-    k, A, b = write_task(t, humanoid.nv, values=values)
-    assert k == -1
-    assert np.isnan(A[:2]).all() and np.isnan(b[:2]).all()  # before its rows: untouched
+    values = list(values_of(t._rowOps()))
+    values[-1] = gain  # controlGain's value (a NaN constant is refused by the signal)
+    assert write_task(t, humanoid.nv, values=values)[0] == rk.REFUSED
     if gain == -1.0:  # the task signal says what is wrong
         t.controlGain.value = gain
         with pytest.raises(SignalTypeError, match="controlGain: expected a finite gain >= 0"):
@@ -565,22 +575,42 @@ def test_task_writer_declines_a_gain_out_of_range(humanoid, gain):
         assert write_task(t, humanoid.nv)[0] == 8
 
 
-def test_task_writer_declines_a_jacobian_of_the_wrong_width(humanoid):
+def test_task_operations_refuse_a_jacobian_of_the_wrong_width(humanoid):
     rng = np.random.default_rng(34)
     t, (_, fg, _) = three_feature_task(humanoid, rng)
     # a buffer of another width than the features' Jacobians
-    assert write_task(t, humanoid.nv + 1)[0] == -1
+    assert write_task(t, humanoid.nv + 1)[0] == rk.REFUSED
     # one feature's Jacobian of another width (the others fit the buffer)
     fg.jacobianIN.value = rng.standard_normal((3, humanoid.nv - 1))
-    assert write_task(t, humanoid.nv)[0] == -1
+    assert write_task(t, humanoid.nv)[0] == rk.REFUSED
     # a column selection longer than the Jacobian
     fg.jacobianIN.value = rng.standard_normal((3, humanoid.nv))
     assert write_task(t, humanoid.nv)[0] == 8
     t.controlSelec.value = Flags([False] * (humanoid.nv + 2) + [True])
-    assert write_task(t, humanoid.nv)[0] == -1
+    assert write_task(t, humanoid.nv)[0] == rk.REFUSED
 
 
-# -- BufferFull -----------------------------------------------------------------------
+def test_task_operations_refuse_rows_that_are_not_finite(humanoid):
+    """A non-finite Jacobian entry or error (a feature's input): refused, and the task
+    signals name it."""
+    rng = np.random.default_rng(35)
+    t, (_, fg, _) = three_feature_task(humanoid, rng)
+    J = rng.standard_normal((3, humanoid.nv))
+    J[0, 4] = np.inf  # a selected row
+    fg.jacobianIN.value = J
+    assert write_task(t, humanoid.nv)[0] == rk.REFUSED
+    with pytest.raises(SotpyError):
+        t.jacobian.value  # noqa: B018
+    fg.jacobianIN.value = rng.standard_normal((3, humanoid.nv))
+    assert write_task(t, humanoid.nv)[0] == 8
+    t.controlGain.value = 1e300  # a finite gain whose target overflows
+    fg.errorIN.value = np.full(3, 1e10)
+    assert write_task(t, humanoid.nv)[0] == rk.REFUSED
+    with np.errstate(over="ignore"), pytest.raises(SotpyError, match="not finite"):
+        t.task.value  # noqa: B018
+
+
+# -- NO_ROOM --------------------------------------------------------------------------
 def _writers(humanoid, continuous, rng):
     pose = pose_feature(FeaturePose, "bf_pose", rng, "111011")
     se3 = pose_feature(FeaturePoseSE3, "bf_se3", rng, "111111")
@@ -591,27 +621,42 @@ def _writers(humanoid, continuous, rng):
     cont = posture_feature(continuous, rng, "bf_cont")  # the callbacks
     task, _ = three_feature_task(humanoid, rng, "bf_task")
     return [
-        (pose, NV, 5),
-        (se3, NV, 6),
-        (gen, NV, 4),
-        (post, humanoid.nv, humanoid.nv - 6),
-        (cont, continuous.nv, 3),
-        (task, humanoid.nv, 8),
+        (pose._rowOp(), NV, 5),
+        (se3._rowOp(), NV, 6),
+        (gen._rowOp(), NV, 4),
+        (post._rowOp(), humanoid.nv, humanoid.nv - 6),
+        (cont._rowOp(), continuous.nv, 3),
+        (task._rowOps(), humanoid.nv, 8),
     ]
 
 
-def test_writers_raise_buffer_full_when_the_rows_do_not_fit(humanoid, continuous):
+def test_programs_answer_no_room_when_the_rows_do_not_fit(humanoid, continuous):
     rng = np.random.default_rng(40)
-    for entity, nv, k in _writers(humanoid, continuous, rng):
-        w = entity._rowWriter()
-        r = 3
-        for rows in (r + k - 1, r):  # one row short; none left at all
-            A, b = np.full((rows, nv), np.nan), np.full(rows, np.nan)
-            with pytest.raises(BufferFull):
-                w.write(values_of(w), 0, A, b, r, 1.0)
-        A, b = np.full((r + k, nv), np.nan), np.full(r + k, np.nan)  # exactly enough
-        assert w.write(values_of(w), 0, A, b, r, 1.0) == k, entity.name
-        assert np.isfinite(A[r:]).all() and np.isnan(A[:r]).all()
+    for ops, nv, k in _writers(humanoid, continuous, rng):
+        for rows in (k - 1, 0):  # one row short; none at all
+            assert run_ops(ops, nv, rows=rows)[0] == rk.NO_ROOM
+        r, A, _, _, _ = run_ops(ops, nv, rows=k)  # exactly enough
+        assert r == k
+        assert np.isfinite(A).all()
+
+
+def test_a_long_program_is_cut_into_calls_with_the_same_rows(humanoid):
+    """Eight tasks of three features: more arrays than one kernel call takes, so the
+    program makes several calls; the rows are those of each task's signals."""
+    rng = np.random.default_rng(41)
+    tasks = [three_feature_task(humanoid, rng, f"long{i}")[0] for i in range(8)]
+    ops = [op for t in tasks for op in t._rowOps()]
+    program = RowProgram(ops)
+    assert len(program._calls) > 2
+    assert program.levels == 8
+    r, A, lo, up, ends = run_ops(ops, humanoid.nv, rows=70, levels=8)
+    assert r == 64
+    np.testing.assert_array_equal(ends, np.arange(8, 65, 8))
+    for i, t in enumerate(tasks):
+        rows = slice(8 * i, 8 * i + 8)
+        np.testing.assert_allclose(A[rows], t.jacobian.value, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lo[rows], t.task.value, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(up[rows], lo[rows])
 
 
 # -- the inequality task's bounds ------------------------------------------------------
@@ -644,44 +689,49 @@ def _references(rng: np.random.Generator, m: int, case: str) -> tuple[np.ndarray
     ["both", "lower only", "upper only", "infinite entries", "lower above upper",
      "lower +inf", "upper -inf", "wrong size", "overflow"],
 )  # fmt: skip
-def test_inequality_bounds_kernel_matches_the_task_callback(case):
-    """``inequality_bounds`` (the bounds of TaskInequality's writer) against the task's
-    own ``_bounds`` callback: the same bounds where the callback accepts the references
-    (to rounding: the writer adds ``c ref`` to the features' ``-c e``, the callback
-    computes ``c (ref - e)``), -1 where it raises."""
-    from sotpy.errors import SotpyError
-    from sotpy.tasks import TaskInequality
-
+def test_inequality_operation_matches_the_task_callback(case):
+    """TaskInequality's operations against the task's own ``lower``/``upper``
+    callback: the same bounds where the callback accepts the references (to rounding:
+    the kernel adds ``c ref`` to ``-c e``, the callback computes ``c (ref - e)``),
+    ``REFUSED`` where it raises."""
     rng = np.random.default_rng(sum(map(ord, case)))  # a seed per case, the same every run
-    task = TaskInequality("ineq_" + case.replace(" ", "_"))
-    m, r, k, dt = 7, 3, 0.7, 1e-3
-    c = k / dt
+    name = "ineq_" + case.replace(" ", "_")
+    m, k, dt = 7, 0.7, 1e-3
     e = rng.standard_normal(m)
+    f = FeatureGeneric(name + "_f")
+    f.errorIN.value = e
+    f.jacobianIN.value = rng.standard_normal((m, NV))
+    task = TaskInequality(name)
+    task.add(f)
+    task.controlGain.value = k
+    task.dt.value = dt
     rinf, rsup = _references(rng, m, case)
-    lo = np.full(m + 5, np.nan)
-    up = np.full(m + 5, np.nan)
-    lo[r : r + m] = -c * e  # what the features' rows leave there
-    got = rk.inequality_bounds(rinf, rsup, c, lo, up, r, m)
+    ops = task._rowOps()
+    assert [made_by(op) for op in ops] == ["GENERIC", "INEQUALITY"]
+    values = list(values_of(ops))
+    o = len(ops[0])  # the INEQUALITY's sources: selection, references, gain, dt
+    values[o + 1], values[o + 2] = rinf, rsup
+    got, A, lo, up, _ = run_ops(ops, NV, rows=m + 3, values=values)
     try:
         with np.errstate(over="ignore"):  # the overflow case: the callback refuses it
             want = task._bounds(rinf, rsup, k, dt, e)
     except SotpyError:
         want = None
-    if want is None:  # "overflow": a finite reference whose bound is not finite
-        assert got == -1
+    if want is None:
+        assert got == rk.REFUSED
         return
     assert got == m
-    assert np.isnan(lo[:r]).all() and np.isnan(up[r + m :]).all()  # only its rows
-    for got_bound, want_bound in ((lo[r : r + m], want[0]), (up[r : r + m], want[1])):
+    assert np.isnan(lo[m:]).all() and np.isnan(up[m:]).all()  # only its rows
+    np.testing.assert_array_equal(A[:m], f.jacobian.value)
+    for got_bound, want_bound in ((lo[:m], want[0]), (up[:m], want[1])):
         np.testing.assert_array_equal(np.isfinite(got_bound), np.isfinite(want_bound))
         np.testing.assert_allclose(got_bound, want_bound, rtol=1e-13, atol=0.0)
 
 
-def test_inequality_bounds_accept_strided_references():
+def test_inequality_operation_accepts_strided_references():
     """A reference handed out as a strided view (a user's entity slicing a vector): the
-    fused write gives the bounds the task's callback gives, with no fallback."""
-    from sotpy.graph import VECTOR, Entity, Output
-    from sotpy.tasks import TaskInequality
+    program gives the bounds the task's callback gives, with no fallback."""
+    from sotpy.graph import VECTOR
 
     class Halves(Entity):
         className = "Halves"
@@ -701,13 +751,12 @@ def test_inequality_bounds_accept_strided_references():
     task.add(fg)
     plug(src.every_other, task.referenceInf)
     task.dt.value = 1e-3
-    writer = task._rowWriter()
-    assert writer is not None
-    values = tuple(s._holder().value for s in writer.sources)
-    assert not values[1].flags.c_contiguous  # referenceInf, strided
-    A = np.full((6, NV), np.nan)
-    lo, up = np.full(6, np.nan), np.full(6, np.nan)
-    assert writer.write(values, 0, A, lo, up, 1) == 4
-    np.testing.assert_allclose(lo[1:5], task.lower.value, rtol=1e-13)
-    np.testing.assert_array_equal(up[1:5], task.upper.value)  # +inf: no referenceSup
-    np.testing.assert_array_equal(A[1:5], task.jacobian.value)
+    ops = task._rowOps()
+    assert ops is not None
+    values = tuple(s._holder().value for op in ops for s in op.sources)
+    assert not values[len(ops[0]) + 1].flags.c_contiguous  # referenceInf, strided
+    r, A, lo, up, _ = run_ops(ops, NV, rows=6, values=values)
+    assert r == 4
+    np.testing.assert_allclose(lo[:4], task.lower.value, rtol=1e-13)
+    np.testing.assert_array_equal(up[:4], task.upper.value)  # +inf: no referenceSup
+    np.testing.assert_array_equal(A[:4], task.jacobian.value)

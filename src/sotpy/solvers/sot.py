@@ -70,7 +70,7 @@ from ..errors import (
 from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, plug
 from ..graph.pool import pool
 from ..tasks import _rowkernels
-from ..tasks.rows import BufferFull, computedByOwnCallback
+from ..tasks.rows import Gather, RowOp, RowProgram, computedByOwnCallback, levelOp
 from ..tasks.task import TaskAbstract
 from .hierarchy import HierarchySolver, checked_max_iter, checked_time_budget
 
@@ -135,8 +135,8 @@ class SOT(Entity):
                     iv.append(joint.idx_v)
             self._qShape = (int(model.nq),)
             self._setSize(int(model.nv))
-        self._iq = np.array(iq, dtype=int)
-        self._iv = np.array(iv, dtype=int)
+        self._iq = np.array(iq, dtype=np.int64)
+        self._iv = np.array(iv, dtype=np.int64)
         if dynamic is not None:
             for sig in ("lowerJl", "upperJl", "upperVl"):
                 plug(dynamic.signal(sig), self.signal(sig))
@@ -145,7 +145,7 @@ class SOT(Entity):
                 plug(source, self.position)
         self._rewire()
         self._fuse = False
-        self.setTaskFusion(_rowkernels.pose_rows is not None)
+        self.setTaskFusion(_rowkernels.write_rows is not None)
 
     @property
     def nv(self) -> int:
@@ -515,197 +515,137 @@ class SOT(Entity):
     # -- fused evaluation of the tasks ------------------------------------------------
     def _fusion(self) -> tuple[tuple[Any, ...], Any] | None:
         """The plan's evaluation of ``control`` (see
-        :meth:`~sotpy.graph.signal.OutputSignal.setPlanFusion`): each task that has a
-        row writer (:mod:`sotpy.tasks.rows`; an equality task's writes ``J`` and
-        ``-lambda e``, an inequality task's ``J`` and both bounds) is read from its
-        features' inputs and written straight into the rows handed to the solver; the
-        other tasks through their signals. None (the usual step) when no task has a
-        writer."""
+        :meth:`~sotpy.graph.signal.OutputSignal.setPlanFusion`): one row program
+        (:mod:`sotpy.tasks.rows`) writes the joint limits and every task's rows into
+        the solver's buffers, the tasks with row operations from their features'
+        inputs, the others from their signals. None (the usual step) when no task has
+        row operations."""
         if not computedByOwnCallback(self.control, SOT.control.fn):
             return None
-        sources: list[Any] = self._headDeps()
-        head = len(sources)
         # the stack as it is now (an edit recompiles the plan, which calls this again)
-        plan: list[tuple[TaskAbstract, Any, int]] = []
+        ops: list[RowOp] = [self._limitsOp()] if self._jointLimits else []
         fused = False
         for t in self._stack:
-            w = t._rowWriter()  # type: ignore[attr-defined]
-            if w is None:
-                deps = [t.jacobian, *((t.lower, t.upper) if t.isInequality else (t.task,))]  # type: ignore[attr-defined]
-                plan.append((t, None, len(deps)))
-                sources += deps
+            task_ops = t._rowOps()  # type: ignore[attr-defined]
+            if task_ops is None:
+                bounds = (t.lower, t.upper) if t.isInequality else (t.task, t.task)  # type: ignore[attr-defined]
+                ops.append(levelOp(t.jacobian, *bounds))
             else:
-                plan.append((t, w.write, len(w)))
-                sources += w.sources
+                ops += task_ops
                 fused = True
         if not fused:
             return None
-        return tuple(sources), functools.partial(self._solveFused, plan, head)
+        program = RowProgram(ops)
+        equalities = (False,) * self._jointLimits + tuple(not t.isInequality for t in self._stack)
+        solve = functools.partial(self._solveFused, program, equalities)
+        return (self.damping, *program.sources), solve
+
+    def _limitsOp(self) -> RowOp:
+        """The joint-limit level as a ``LIMITS`` operation (the rows of
+        :meth:`_limitLevel`, from the limits' rows kept in ``_limits``, made again when
+        a limit changes: that raises the error naming a bad limit)."""
+        ndarray, shape = np.ndarray, self._qShape
+
+        def bind(at: tuple[int, ...]) -> Gather:
+            aiq, aiv, aq, alim, sdt = at
+
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                q, lower, upper, vmax, dt = v[o : o + 5]
+                cache = self._limits
+                if (
+                    cache is None
+                    or cache[0] is not lower
+                    or cache[1] is not upper
+                    or cache[2] is not vmax
+                ):
+                    cache = self._limits = self._limitRows(lower, upper, vmax)  # new limits
+                if type(q) is not ndarray or q.shape != shape or type(dt) is not float:
+                    return False
+                if not dt > 0.0:
+                    return False
+                args[aiq], args[aiv], args[aq], args[alim] = cache[3], cache[9], q, cache[10]
+                scal[sdt] = dt
+                return True
+
+            return gather
+
+        sources = (self.position, self.lowerJl, self.upperJl, self.upperVl, self.dt)
+        return RowOp(_rowkernels.LIMITS, "iivms", sources, bind)
+
+    def _fromSignals(self) -> np.ndarray:
+        """The control from the task signals (their callbacks raise what is wrong)."""
+        return self._solve(tuple(s.value for s in self.control._deps))
 
     def _solveFused(
-        self, plan: list[tuple[TaskAbstract, Any, int]], head: int, *values: Any
+        self, program: RowProgram, equalities: tuple[bool, ...], damping: Any, *values: Any
     ) -> np.ndarray:
-        known = self._inPlace
-        while True:
-            try:
-                if known is not None and known[0] is plan:
-                    x = self._solveInPlace(plan, head, values, known[1])
-                    if x is not None:
-                        return x
-                    known = None  # sizes changed, or something to report: the levels
-                levels, lams = self._fusedLevels(plan, head, values)
-                break
-            except BufferFull:
-                A = self._rowsA
-                self._rowsA = np.empty((2 * A.shape[0], self.nv))
-                self._rowsB = np.empty(2 * A.shape[0])
-                self._rowsU = np.empty(2 * A.shape[0])
-            except TypeError as exc:
-                # a kernel refused its arguments (types it was not compiled for) or a
-                # callback failed: the signals decide, and raise if they fail too
-                x = self._solve(tuple(s.value for s in self.control._deps))
-                refused(f"SOT({self.name})'s task rows", exc)
-                self.setTaskFusion(False)
-                return x
-        if levels is None:  # a writer declined: the task signals, with their checks
-            self._inPlace = None
-            return self._solve(tuple(s.value for s in self.control._deps))
-        x = self._finish(levels, lams)
-        self._inPlace = (plan, tuple(len(level[0]) for level in levels))
-        return x
-
-    def _solveInPlace(
-        self,
-        plan: list[tuple[TaskAbstract, Any, int]],
-        head: int,
-        values: tuple[Any, ...],
-        sizes: tuple[int, ...],
-    ) -> np.ndarray | None:
-        """:meth:`_fusedLevels` and the solve with every row written straight into the
-        solver's stacked buffers (:meth:`HierarchySolver.stacked`), for the level sizes
-        of the previous tick. None (nothing kept) when a size differs or when anything
-        is to be reported: the caller then goes through :meth:`_fusedLevels`, whose
-        checks and the task signals say what is wrong."""
-        damping = values[0]
-        if not isinstance(damping, float) or not 0.0 <= damping < math.inf:
-            return None
+        """The control, the rows written by ``program``: in place into the solver's
+        buffers when the level sizes are those of the previous tick, else into the
+        SOT's own buffers and solved as levels. ``equalities`` says which levels are
+        equalities. Anything the program refuses goes through the signals."""
+        if type(damping) is not float or not 0.0 <= damping < math.inf:
+            return self._fromSignals()  # the damping's own error
+        lams: Any = 0.0
+        overrides = self._taskDamping
+        if overrides or damping:
+            per = [overrides.get(t.name, damping) for t in self._stack] if overrides else None
+            lams = [0.0] * self._jointLimits + (per or [damping] * len(self._stack))
+            if not any(lams):
+                lams = 0.0
         solver = self._solver
-        A, lo, up, starts = solver.stacked(sizes)
-        ndarray = np.ndarray
-        lams: list[float] = []
-        general = False
-        k = 0
-        if self._jointLimits:  # the rows of _limitLevel, computed in place
-            q, lower, upper, vmax, dt = values[1:6]
-            cache = self._limits
-            if (
-                cache is None
-                or cache[0] is not lower
-                or cache[1] is not upper
-                or cache[2] is not vmax
-                or cache[8].shape[0] != starts[1]
-                or type(q) is not ndarray
-                or q.shape != self._qShape
-                or not isinstance(dt, float)
-                or not dt > 0.0
-            ):
-                return None
-            A[: starts[1]] = cache[8]
-            _rowkernels.limit_bounds(q, cache[3], cache[4], cache[5], cache[6], dt, lo, up, 0)
-            lams.append(0.0)
-            general = True
-            k = 1
-        overrides = self._taskDamping
-        nv = self.nv
-        o = head
-        for task, write, n in plan:
-            s, e = starts[k], starts[k + 1]
-            if write is None:
-                J = values[o]
-                if type(J) is not ndarray or J.shape != (e - s, nv):
-                    return None
-                A[s:e] = J
-                bounds = values[o + 1 : o + 3] if task.isInequality else values[o + 1 : o + 2]
-                try:
-                    lo[s:e] = bounds[0]
-                    up[s:e] = bounds[-1]
-                except (TypeError, ValueError):
-                    return None
-                general = general or task.isInequality
-            elif task.isInequality:  # J, lower and upper
-                try:
-                    if write(values, o, A, lo, up, s) != e - s:
-                        return None
-                except BufferFull:
-                    return None
-                general = True
-            else:
-                try:
-                    if write(values, o, A, lo, s, 0.0) != e - s:
-                        return None
-                except BufferFull:
-                    return None
-                up[s:e] = lo[s:e]
-            lams.append(overrides.get(task.name, damping) if overrides else damping)
-            o += n
-            k += 1
         try:
-            result = solver.solve_stacked(lams if any(lams) else 0.0, equality=not general)
-        except SotpyError:
-            return None
-        return self._accept(result)
-
-    def _fusedLevels(
-        self, plan: list[tuple[TaskAbstract, Any, int]], head: int, values: tuple[Any, ...]
-    ) -> tuple[Any, list[float]]:
-        """The levels, the fused tasks' rows written into ``_rowsA``/``_rowsB``;
-        ``(None, [])`` when a writer declines or a row is not finite."""
-        nv = self.nv
-        levels, lams, damping = self._head(iter(values[:head]))
-        overrides = self._taskDamping
-        A, b, u = self._rowsA, self._rowsB, self._rowsU
-        r = 0
-        o = head
-        ndarray = np.ndarray
-        targets = 0.0  # the equality targets' sum of squares
-        for task, write, n in plan:
-            if write is None:
-                J = values[o]
-                if type(J) is not ndarray or J.ndim != 2 or J.shape[1] != nv:
-                    return None, []
-                if task.isInequality:
-                    levels.append((J, values[o + 1], values[o + 2]))
-                else:
-                    levels.append((J, values[o + 1], values[o + 1]))
-            else:
-                if task.isInequality:  # its writer checks its bounds
-                    k = write(values, o, A, b, u, r)
-                else:
-                    k = write(values, o, A, b, r, 0.0)
-                if k < 0:
-                    return None, []
-                Ak, bk = A[r : r + k], b[r : r + k]
-                if task.isInequality:
-                    levels.append((Ak, bk, u[r : r + k]))
-                else:
-                    levels.append((Ak, bk, bk))
-                    targets += float(bk.dot(bk))
-                r += k
-            o += n
-            lams.append(overrides.get(task.name, damping) if overrides else damping)
-        if r:
-            Ar = A[:r]
-            # finite iff the sums of squares are (an overflow: the signals decide)
-            if not (math.isfinite(np.vdot(Ar, Ar)) and math.isfinite(targets)):
-                return None, []
-        return levels, lams
+            known = self._inPlace
+            if known is not None and known[0] is program:
+                A, lo, up, _ = solver.stacked(known[1])
+                r = program.run(values, A, lo, up, known[2], True)
+                if r >= 0:
+                    try:
+                        result = solver.solve_stacked(lams, equality=all(equalities))
+                    except SotpyError:
+                        return self._fromSignals()  # the checks of solve() name it
+                    return self._accept(result)
+                if r == _rowkernels.REFUSED:
+                    return self._fromSignals()
+            # a first tick, or the level sizes changed: the SOT's buffers, then levels
+            ends = np.empty(program.levels, dtype=np.int64)
+            while True:
+                A, lo, up = self._rowsA, self._rowsB, self._rowsU
+                r = program.run(values, A, lo, up, ends, False)
+                if r != _rowkernels.NO_ROOM:
+                    break
+                m = 2 * A.shape[0]
+                self._rowsA, self._rowsB, self._rowsU = (
+                    np.empty((m, self.nv)),
+                    np.empty(m),
+                    np.empty(m),
+                )
+        except TypeError as exc:
+            # the kernel refused its arguments (types it was not compiled for) or a
+            # callback failed: the signals decide, and raise if they fail too
+            x = self._fromSignals()
+            refused(f"SOT({self.name})'s task rows", exc)
+            self.setTaskFusion(False)
+            return x
+        if r < 0:
+            self._inPlace = None
+            return self._fromSignals()
+        levels = []
+        start = 0
+        for end, equality in zip(ends.tolist(), equalities, strict=True):
+            level = (A[start:end], lo[start:end], lo[start:end] if equality else up[start:end])
+            levels.append(level)
+            start = end
+        x = self._finish(levels, lams if isinstance(lams, list) else [0.0] * len(levels))
+        sizes = tuple(len(level[0]) for level in levels)
+        self._inPlace = (program, sizes, ends)
+        return x
 
     @command
     def setTaskFusion(self, enabled: bool) -> None:
         """Evaluate the equality tasks' rows in one pass from their features' inputs
         (default, with numba), or through each feature's and task's signals (see
         ``docs/tasks.md``, "Fused rows"). The control is the same either way."""
-        if enabled and _rowkernels.pose_rows is None:
+        if enabled and _rowkernels.write_rows is None:
             raise CommandError(
                 f"SOT({self.name}).setTaskFusion: the fused evaluation needs the compiled "
                 f"kernels ({_jit.UNAVAILABLE})"
@@ -728,7 +668,7 @@ class SOT(Entity):
         cache = self._limits
         if cache is None or cache[0] is not lower or cache[1] is not upper or cache[2] is not vmax:
             cache = self._limits = self._limitRows(lower, upper, vmax)
-        _, _, _, iq, ql, qu, vm, nvm, A = cache
+        _, _, _, iq, ql, qu, vm, nvm, A = cache[:9]
         qj = np.asarray(q)[iq]
         lo = np.subtract(ql, qj)
         lo /= dt
@@ -762,4 +702,6 @@ class SOT(Entity):
         A[np.arange(len(rows)), self._iv[rows]] = 1.0
         A.flags.writeable = False
         vm = vm[rows]
-        return (lower, upper, vmax, self._iq[rows], ql[rows], qu[rows], vm, -vm, A)
+        ql, qu, iv = ql[rows], qu[rows], self._iv[rows]
+        lim = np.array([ql, qu, vm])  # for the row program's LIMITS operation
+        return (lower, upper, vmax, self._iq[rows], ql, qu, vm, -vm, A, iv, lim)

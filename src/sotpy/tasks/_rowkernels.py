@@ -1,11 +1,12 @@
-r"""Compiled kernels that write task rows straight into a solver's stacked buffer
-(internal to ``sotpy.tasks``: the row writers of the features, :mod:`.rows`).
+r"""The compiled kernel that writes an SOT's task rows straight into a solver's stacked
+buffer (internal to ``sotpy.tasks``: the row programs of :mod:`.rows`).
 
-Each kernel writes, for the selected rows ``k`` of one feature, the Jacobian row into
-``A[r + i, :]`` and the equality target ``-gain * e_k`` into ``b[r + i]``: the values
-the feature's ``jacobian`` and the task's ``task`` signals hold, without the
-intermediate arrays. The formulas are those of the features (``features.py``); the
-tests compare the two paths on random inputs.
+:func:`write_rows` runs a whole program in one call: for each feature the Jacobian
+rows and the error, for each task its targets or bounds, the SOT's joint-limit level
+and the tasks read through their signals: the values the features' ``jacobian`` and
+``error`` and the tasks' ``task`` (or ``lower``/``upper``) signals hold, without the
+intermediate arrays. The formulas are those of the features (``features.py``) and
+tasks (``task.py``); the tests compare the two paths on random inputs.
 
 :func:`log3` and :func:`jlog3` are the rotation logarithm and its Jacobian, written
 here so that they compile with the rest (Pinocchio's are Python calls):
@@ -85,126 +86,279 @@ def _jlog3(w, theta, J):  # pragma: no cover - compiled
     J[2, 1] = 0.5 * x + c * y * z
 
 
-def _pose_rows(R, p, Rd, pd, Jq, rows, A, b, r, gain):  # pragma: no cover - compiled
-    """FeaturePose's selected rows: ``Mr = (Rd^T R, Rd^T (p - pd))``, error ``(p_r,
-    log3(R_r))``, Jacobian ``diag(R_r, Jlog3(R_r)) Jq``; row ``i`` of the output is
-    feature row ``rows[i]``. ``A[r + i] = J_k``, ``b[r + i] = -gain e_k``."""
+#: Operation kinds of a row program (``code[op, 0]``; see :mod:`.rows` and
+#: :func:`_write_rows` for each one's fields).
+POSE, GENERIC, POSTURE, ROWS, EQUALITY, INEQUALITY, LIMITS, LEVEL = range(8)
+#: How many matrices, vectors and index vectors one call takes (a longer program is
+#: cut into several calls, see :class:`.rows.RowProgram`).
+MATS, VECS, INTS = 12, 16, 12
+#: Width of a program's ``code`` rows: the kind, then up to six fields.
+FIELDS = 7
+
+# Return codes of _write_rows besides a row count >= 0.
+REFUSED = -1  # something the signals' callbacks would refuse (they then say what)
+NO_ROOM = -2  # the rows do not fit in A
+RESIZED = -3  # a level's size differs from ``ends`` (with ``fixed``)
+
+
+def _write_rows(  # pragma: no cover - compiled
+    code, scal, state, A, lo, up, ends, fixed,
+    m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11,
+    v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15,
+    i0, i1, i2, i3, i4, i5, i6, i7, i8, i9, i10, i11,
+):  # fmt: skip
+    """Run the operations ``code`` (one per row: ``code[op, 0]`` its kind, then its
+    fields: positions in ``mats = (m0, ...)``, ``vecs = (v0, ...)``, ``ints = (i0, ...)``
+    or ``scal``; -1 for an absent optional one), writing rows of ``A``, ``lo`` and ``up``
+    from row ``state[0]`` on. The arrays are positional arguments rather than tuples:
+    numba's dispatcher then types them in C, whatever their layout (measured: 2.5 us
+    for 40 arrays, 10 us as tuples of mixed layouts).
+
+    A feature's operation writes its selected rows ``k``: the Jacobian row into ``A``
+    and its error ``e_k`` into ``lo``.
+
+    * ``POSE (sel, R, R*, Jq, p, p*)``: FeaturePose. ``Mr = (R*^T R, R*^T (p - p*))``,
+      ``e = (p_r, log3(R_r))``, ``J = diag(R_r, Jlog3(R_r)) Jq``.
+    * ``GENERIC (sel, J, s, s*)``: FeatureGeneric. ``J_k``, ``e_k = s_k - s*_k``
+      (``s_k`` without ``s*``).
+    * ``POSTURE (iq, iv, q, q*, J, e)``: FeaturePosture's one-DoF joints. Row ``iv_i``
+      of the identity, ``e_i = q[iq_i] - q*[iq_i]``; with ``iv = [-1]``, ``J`` and
+      ``e`` as ``ROWS`` (a selection with richer joints: the callbacks computed them).
+    * ``ROWS (J, e)``: every row as given (a feature's own callbacks computed them).
+
+    A task's operation then closes a level over the rows written since the previous
+    level:
+
+    * ``EQUALITY (gain, cols)``: ``lo = up = -gain e``.
+    * ``INEQUALITY (c, inf, sup, cols)``: ``lo = -c e + c inf`` and ``up = -c e + c
+      sup`` (``-inf``/``+inf`` where a reference is empty), as ``TaskInequality``.
+    * ``cols``: the columns the task keeps (``[-1]``: all); the others become 0.
+
+    A level operation writes a whole level:
+
+    * ``LIMITS (iq, iv, q, lim, dt)``: the SOT's joint limits. Row ``iv_i`` of the
+      identity, ``lo = clip((lim[0] - q[iq]) / dt, -lim[2], lim[2])``, ``up`` the same
+      with ``lim[1]``.
+    * ``LEVEL (J, lower, upper)``: a task read through its signals, copied.
+
+    Level ``k`` ends at row ``ends[k]``: written there, or, with ``fixed``, checked
+    against it. ``state = (row, first row of the open level, level)`` carries on to the
+    next call of a program cut into several. Returns the row after the last one
+    written, or :data:`REFUSED` (a shape, a gain, a period or a reference out of range,
+    an index out of bounds, a value that is not finite), :data:`NO_ROOM` or
+    :data:`RESIZED`; the rows written so far are then not to be used.
+    """
+    mats = (m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11)
+    vecs = (v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15)
+    ints = (i0, i1, i2, i3, i4, i5, i6, i7, i8, i9, i10, i11)
     n = A.shape[1]
+    cap = A.shape[0]
+    r, t0, lev = state[0], state[1], state[2]
     Rr = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            Rr[i, j] = Rd[0, i] * R[0, j] + Rd[1, i] * R[1, j] + Rd[2, i] * R[2, j]
-    e = np.empty(6)
-    for i in range(3):
-        e[i] = Rd[0, i] * (p[0] - pd[0]) + Rd[1, i] * (p[1] - pd[1]) + Rd[2, i] * (p[2] - pd[2])
-    rot = False
-    for k in rows:
-        if k >= 3:
-            rot = True
     Jl = np.empty((3, 3))
-    if rot:
-        theta = _log3_c(Rr, e[3:])
-        _jlog3_c(e[3:], theta, Jl)
-    for i in range(rows.shape[0]):
-        k = rows[i]
-        D = Rr if k < 3 else Jl
-        kk = k if k < 3 else k - 3
-        off = 0 if k < 3 else 3
-        d0, d1, d2 = D[kk, 0], D[kk, 1], D[kk, 2]
-        for j in range(n):
-            A[r + i, j] = d0 * Jq[off, j] + d1 * Jq[off + 1, j] + d2 * Jq[off + 2, j]
-        b[r + i] = -gain * e[k]
-
-
-def _generic_rows(s, sdes, J, rows, A, b, r, gain):  # pragma: no cover - compiled
-    """FeatureGeneric's selected rows: ``A[r + i] = J[k]``, ``b[r + i] = -gain (s_k -
-    sdes_k)`` with ``k = rows[i]`` (``sdes`` empty: no reference)."""
-    n = A.shape[1]
-    ref = sdes.shape[0] > 0
-    for i in range(rows.shape[0]):
-        k = rows[i]
-        for j in range(n):
-            A[r + i, j] = J[k, j]
-        b[r + i] = -gain * (s[k] - sdes[k]) if ref else -gain * s[k]
-
-
-def _posture_rows(q, qdes, iq, iv, A, b, r, gain):  # pragma: no cover - compiled
-    """FeaturePosture's rows for one-DoF joints whose configuration is their angle:
-    ``A[r + i]`` the row ``iv[i]`` of the identity, ``b[r + i] = -gain (q - q*)`` at
-    configuration index ``iq[i]``."""
-    n = A.shape[1]
-    for i in range(iv.shape[0]):
-        for j in range(n):
-            A[r + i, j] = 0.0
-        A[r + i, iv[i]] = 1.0
-        b[r + i] = -gain * (q[iq[i]] - qdes[iq[i]])
-
-
-def _limit_bounds(q, iq, ql, qu, vm, dt, lo, up, r):  # pragma: no cover - compiled
-    """The SOT's joint-limit level (bounds on ``qdot_j`` for the joints at ``iq``):
-    ``lo[r + i] = clip((ql_i - q_j) / dt, -vm_i, vm_i)`` and ``up[r + i]`` the same with
-    ``qu_i``, in the operations and order of :meth:`SOT._limitLevel` (a NaN stays NaN,
-    as with ``np.maximum``/``np.minimum``). ``q`` must hold every ``iq``."""
-    for i in range(iq.shape[0]):
-        qi = q[iq[i]]
-        v = vm[i]
-        a = (ql[i] - qi) / dt
-        b = (qu[i] - qi) / dt
-        if a < -v:
-            a = -v
-        if a > v:
-            a = v
-        if b < -v:
-            b = -v
-        if b > v:
-            b = v
-        lo[r + i] = a
-        up[r + i] = b
-
-
-def _inequality_bounds(rinf, rsup, c, lo, up, r, m):  # pragma: no cover - compiled
-    """TaskInequality's bounds from its references, in place: on entry ``lo[r:r + m]``
-    holds ``-c e`` (the features' rows), on exit ``lo = -c e + c referenceInf`` and
-    ``up = -c e + c referenceSup`` (``-inf``/``+inf`` where a reference is empty), the
-    operations of :meth:`TaskInequality._bounds`. Returns ``m``, or -1 (the task's
-    callbacks then say what is wrong) when a reference's size is neither 0 nor ``m``,
-    a lower reference is ``+inf`` or an upper one ``-inf``, ``referenceInf >
-    referenceSup``, or a finite reference gives a bound that is not finite (an
-    overflow). On -1 the bounds written so far are not to be used."""
-    ni, ns = rinf.shape[0], rsup.shape[0]
-    if (ni != 0 and ni != m) or (ns != 0 and ns != m):
-        return -1
-    for i in range(m):
-        b = lo[r + i]
-        lower, upper = -math.inf, math.inf
-        if ni:
-            ri = rinf[i]
-            if not ri < math.inf:
-                return -1
-            lower = ri * c + b
-            if math.isfinite(ri) != math.isfinite(lower):
-                return -1
-        if ns:
-            si = rsup[i]
-            if not si > -math.inf:
-                return -1
-            if ni and rinf[i] > si:
-                return -1
-            upper = si * c + b
-            if math.isfinite(si) != math.isfinite(upper):
-                return -1
-        lo[r + i] = lower
-        up[r + i] = upper
-    return m
+    e = np.empty(6)
+    keep = np.empty(n, dtype=np.bool_)
+    for op in range(code.shape[0]):
+        kind = code[op, 0]
+        f1, f2, f3, f4, f5, f6 = (
+            code[op, 1],
+            code[op, 2],
+            code[op, 3],
+            code[op, 4],
+            code[op, 5],
+            code[op, 6],
+        )
+        r0 = r
+        closes = False
+        if kind == POSTURE and ints[f2].shape[0] == 1 and ints[f2][0] < 0:
+            kind, f1, f2 = ROWS, f5, f6  # the rows its callbacks computed
+        if kind == POSE:
+            sel, R, Rd, Jq, p, pd = ints[f1], mats[f2], mats[f3], mats[f4], vecs[f5], vecs[f6]
+            if Jq.shape[0] != 6 or Jq.shape[1] != n or R.shape[0] != 3 or R.shape[1] != 3:
+                return REFUSED
+            if Rd.shape[0] != 3 or Rd.shape[1] != 3 or p.shape[0] != 3 or pd.shape[0] != 3:
+                return REFUSED
+            k = sel.shape[0]
+            if r + k > cap:
+                return NO_ROOM
+            rot = False
+            for i in range(k):
+                if sel[i] < 0 or sel[i] >= 6:
+                    return REFUSED
+                if sel[i] >= 3:
+                    rot = True
+            for i in range(3):
+                for j in range(3):
+                    Rr[i, j] = Rd[0, i] * R[0, j] + Rd[1, i] * R[1, j] + Rd[2, i] * R[2, j]
+            for i in range(3):
+                e[i] = (
+                    Rd[0, i] * (p[0] - pd[0])
+                    + Rd[1, i] * (p[1] - pd[1])
+                    + Rd[2, i] * (p[2] - pd[2])
+                )
+            if rot:
+                theta = _log3_c(Rr, e[3:])
+                _jlog3_c(e[3:], theta, Jl)
+            for i in range(k):
+                kk = sel[i]
+                D = Rr if kk < 3 else Jl
+                off = 0 if kk < 3 else 3
+                d0, d1, d2 = D[kk - off, 0], D[kk - off, 1], D[kk - off, 2]
+                for j in range(n):
+                    A[r + i, j] = d0 * Jq[off, j] + d1 * Jq[off + 1, j] + d2 * Jq[off + 2, j]
+                lo[r + i] = e[kk]
+            r += k
+        elif kind == GENERIC:
+            sel, J, s = ints[f1], mats[f2], vecs[f3]
+            m = s.shape[0]
+            ref = f4 >= 0
+            sd = vecs[f4] if ref else s
+            if J.shape[0] != m or J.shape[1] != n or sd.shape[0] != m:
+                return REFUSED
+            k = sel.shape[0]
+            if r + k > cap:
+                return NO_ROOM
+            for i in range(k):
+                kk = sel[i]
+                if kk < 0 or kk >= m:
+                    return REFUSED
+                for j in range(n):
+                    A[r + i, j] = J[kk, j]
+                lo[r + i] = s[kk] - sd[kk] if ref else s[kk]
+            r += k
+        elif kind in (POSTURE, LIMITS):
+            iq, iv, q = ints[f1], ints[f2], vecs[f3]
+            k = iv.shape[0]
+            if iq.shape[0] != k:
+                return REFUSED
+            if r + k > cap:
+                return NO_ROOM
+            qd = vecs[f4] if kind == POSTURE else q
+            lim = mats[f4] if kind == LIMITS else mats[0]
+            if kind == LIMITS and (lim.shape[0] != 3 or lim.shape[1] != k):
+                return REFUSED
+            dt = scal[f5] if kind == LIMITS else 1.0
+            if not dt > 0.0:
+                return REFUSED
+            for i in range(k):
+                a, c = iq[i], iv[i]
+                if a < 0 or a >= q.shape[0] or a >= qd.shape[0] or c < 0 or c >= n:
+                    return REFUSED
+                for j in range(n):
+                    A[r + i, j] = 0.0
+                A[r + i, c] = 1.0
+                if kind == POSTURE:
+                    lo[r + i] = q[a] - qd[a]
+                else:  # the operations and order of SOT._limitLevel (NaN stays NaN)
+                    v = lim[2, i]
+                    x = (lim[0, i] - q[a]) / dt
+                    y = (lim[1, i] - q[a]) / dt
+                    x = -v if x < -v else x
+                    x = v if x > v else x
+                    y = -v if y < -v else y
+                    y = v if y > v else y
+                    lo[r + i] = x
+                    up[r + i] = y
+            r += k
+            closes = kind == LIMITS
+        elif kind in (ROWS, LEVEL):
+            J, b = mats[f1], vecs[f2]
+            m = b.shape[0]
+            bu = vecs[f3] if kind == LEVEL else b
+            if J.shape[0] != m or J.shape[1] != n or bu.shape[0] != m:
+                return REFUSED
+            if r + m > cap:
+                return NO_ROOM
+            for i in range(m):
+                for j in range(n):
+                    A[r + i, j] = J[i, j]
+                lo[r + i] = b[i]
+                if kind == LEVEL:
+                    up[r + i] = bu[i]
+            r += m
+            closes = kind == LEVEL
+        elif kind in (EQUALITY, INEQUALITY):
+            cols = ints[f2] if kind == EQUALITY else ints[f4]
+            ss = 0.0
+            for i in range(t0, r):
+                ss += lo[i] * lo[i]
+            if not math.isfinite(ss):  # an error that overflowed: the callbacks say so
+                return REFUSED
+            if kind == EQUALITY:
+                g = scal[f1]
+                if not (g >= 0.0 and g < math.inf):
+                    return REFUSED
+                ss = 0.0
+                for i in range(t0, r):
+                    lo[i] = -g * lo[i]
+                    up[i] = lo[i]
+                    ss += lo[i] * lo[i]
+                if not math.isfinite(ss):  # a target that overflowed
+                    return REFUSED
+            else:
+                c, rinf, rsup = scal[f1], vecs[f2], vecs[f3]
+                m = r - t0
+                ni, ns = rinf.shape[0], rsup.shape[0]
+                if (ni != 0 and ni != m) or (ns != 0 and ns != m) or not 0.0 < c < math.inf:
+                    return REFUSED
+                for i in range(m):
+                    b = -c * lo[t0 + i]
+                    lower, upper = -math.inf, math.inf
+                    if ni:
+                        ri = rinf[i]
+                        if not ri < math.inf:
+                            return REFUSED
+                        lower = ri * c + b
+                        if math.isfinite(ri) != math.isfinite(lower):
+                            return REFUSED
+                    if ns:
+                        si = rsup[i]
+                        if not si > -math.inf:
+                            return REFUSED
+                        if ni and rinf[i] > si:
+                            return REFUSED
+                        upper = si * c + b
+                        if math.isfinite(si) != math.isfinite(upper):
+                            return REFUSED
+                    lo[t0 + i] = lower
+                    up[t0 + i] = upper
+            if not (cols.shape[0] == 1 and cols[0] < 0):  # a column selection
+                keep[:] = False
+                for j in range(cols.shape[0]):
+                    if cols[j] < 0 or cols[j] >= n:
+                        return REFUSED
+                    keep[cols[j]] = True
+                for i in range(t0, r):
+                    for j in range(n):
+                        if not keep[j]:
+                            A[i, j] = 0.0
+            closes = True
+        else:
+            return REFUSED
+        # the Jacobian rows written by this operation: finite (a sum of squares that is)
+        ss = 0.0
+        for i in range(r0, r):
+            for j in range(n):
+                ss += A[i, j] * A[i, j]
+        if not math.isfinite(ss):
+            return REFUSED
+        if closes:
+            if fixed:
+                if lev >= ends.shape[0] or ends[lev] != r:
+                    return RESIZED
+            elif lev < ends.shape[0]:
+                ends[lev] = r
+            else:
+                return NO_ROOM
+            lev += 1
+            t0 = r
+    state[0], state[1], state[2] = r, t0, lev
+    return r
 
 
 _log3_c = kernel(_log3)
 _jlog3_c = kernel(_jlog3)
-pose_rows = kernel(_pose_rows)
-generic_rows = kernel(_generic_rows)
-posture_rows = kernel(_posture_rows)
-limit_bounds = kernel(_limit_bounds)
-inequality_bounds = kernel(_inequality_bounds)
+write_rows = kernel(_write_rows)
 _warm: list[bool] = []
 
 
@@ -223,51 +377,38 @@ def jlog3(R: np.ndarray) -> np.ndarray:
     return J
 
 
+def _padding(ndim: int, dtype: type) -> np.ndarray:
+    """A read-only array of layout ``A`` (a strided view): the type every matrix,
+    vector or index argument of :func:`write_rows` is compiled for. numba converts any
+    float64 (int64) array of that dimension to it, C or Fortran, writable or not, so
+    that one compiled version serves them all."""
+    a = np.zeros((3, 4) if ndim == 2 else 4, dtype=dtype)[..., ::2]
+    a.setflags(write=False)
+    return a
+
+
+#: The arguments a call of ``write_rows`` pads its unused positions with.
+PAD = (
+    (_padding(2, np.float64),) * MATS + (_padding(1, np.float64),) * VECS
+    + (_padding(1, np.int64),) * INTS
+)  # fmt: skip
+
+
 def warm_up() -> None:
-    """Compile (or load from the cache) the kernels for the argument types a tick
-    passes (Pinocchio's column-major rotations, C-order Jacobians, int64 rows), then
-    forbid further compilation: an unforeseen type raises ``TypeError`` at the call
-    and the caller goes back to the feature signals, instead of compiling mid-loop.
-
-    The arrays a kernel only reads are given read-only here: numba then accepts both a
-    read-only and a writable array there (a signal's value may be either), without a
-    version compiled for each combination."""
-    if pose_rows is None or _warm:
+    """Compile (or load from the cache) ``write_rows`` for the argument types it is
+    given (see :func:`_padding`; the rows go to a strided view, as into the solver's
+    stacked ``[A | -ref]``), then forbid further compilation: an unforeseen type (an
+    integer Jacobian) raises ``TypeError`` at the call and the caller goes back to the
+    signals, instead of compiling mid-loop."""
+    if write_rows is None or _warm:
         return
-    import pinocchio as pin
-
-    def ro(a: np.ndarray) -> np.ndarray:
-        v = a.view()
-        v.setflags(write=False)
-        return v
-
-    M = pin.SE3.Identity()
-    n = 2
+    A = np.zeros((6, 3))[:, :2]
     b = np.zeros(6)
-    Jq = ro(np.zeros((6, n)))
-    rows = ro(np.arange(6, dtype=np.int64))
-    s, J = ro(np.zeros(3)), ro(np.zeros((3, n)))
-    # rows into a C-order buffer (the SOT's own) or into the m x n view of the solver's
-    # stacked [A | -ref] (HierarchySolver.stacked)
-    for A in (np.zeros((6, n)), np.zeros((6, n + 1))[:, :n]):
-        for R, p in ((M.rotation, M.translation), (np.eye(3), np.zeros(3))):
-            R, p = ro(R), ro(p)
-            pose_rows(R, p, R, p, Jq, rows, A, b, 0, 1.0)
-        generic_rows(s, s, J, rows[:3], A, b, 0, 1.0)
-        generic_rows(s, s[:0], J, rows[:3], A, b, 0, 1.0)
-        posture_rows(s, s, rows[:1], rows[:1], A, b, 0, 1.0)
+    code = np.full((1, FIELDS), -1, dtype=np.int64)
+    code[0, 0] = LIMITS
+    write_rows(code[:0], b, np.zeros(3, np.int64), A, b, b, np.zeros(1, np.int64), False, *PAD)
     log3(np.eye(3))
     jlog3(np.eye(3))
-    limit_bounds(s, rows[:1], s, s, s, 1.0, b, b, 0)
-    inequality_bounds(s, s[:0], 1.0, b, b, 0, 3)
-    for k in (
-        pose_rows,
-        generic_rows,
-        posture_rows,
-        limit_bounds,
-        inequality_bounds,
-        _log3_c,
-        _jlog3_c,
-    ):
+    for k in (write_rows, _log3_c, _jlog3_c):
         k.disable_compile()
     _warm.append(True)

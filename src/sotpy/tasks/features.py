@@ -64,7 +64,7 @@ from ..graph import (
 )
 from ..graph.signal import InputSignal, Signal
 from . import _rowkernels
-from .rows import BufferFull, RowWriter, callbackWriter, computedByOwnCallback
+from .rows import CALLBACK_ROWS, Gather, RowOp, callbackOp, computedByOwnCallback
 
 __all__ = [
     "FLAGS",
@@ -366,19 +366,19 @@ class FeatureAbstract(Entity):
         self._indexCache = (selec, n, idx)
         return idx
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOp(self) -> RowOp | None:
         """How an SOT writes this feature's rows straight into its buffer (see
         :mod:`sotpy.tasks.rows`); None if it must read the feature's signals. This one
         calls the ``error`` and ``jacobian`` callbacks; the common features override
-        it with a compiled kernel."""
-        return callbackWriter(self.error, self.jacobian)
+        it with an operation of the compiled kernel."""
+        return callbackOp(self.error, self.jacobian)
 
     def _ownCallbacks(self, cls: type[FeatureAbstract]) -> bool:
         """Whether this feature is exactly a ``cls`` whose ``error`` and ``jacobian``
         compute with ``cls``'s methods at every tick (a row kernel may replace them)."""
         return (
             type(self) is cls
-            and _rowkernels.pose_rows is not None
+            and _rowkernels.write_rows is not None
             and computedByOwnCallback(self.error, cls._error)
             and computedByOwnCallback(self.jacobian, cls._jacobian)
         )
@@ -498,35 +498,34 @@ class FeatureGeneric(FeatureAbstract):
     def _jacobian(self, selec: Flags, J: np.ndarray) -> np.ndarray:
         return _take(J, self._rows(selec, J.shape[0]))
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOp(self) -> RowOp | None:
         if not self._ownCallbacks(FeatureGeneric):
-            return super()._rowWriter()
+            return super()._rowOp()
         error, jacobian = self.error, self.jacobian
         ne = len(error._srcs)  # (selec, errorIN[, reference's errorIN])
-        kernel = _rowkernels.generic_rows
         ndarray = np.ndarray
 
-        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
-            selec, s = v[o], v[o + 1]
-            sdes = v[o + 2] if ne == 3 else _EMPTY
-            J = v[o + ne + 1]
-            if (
-                type(s) is not ndarray
-                or type(J) is not ndarray
-                or type(sdes) is not ndarray
-                or s.ndim != 1
-                or J.shape != (s.shape[0], A.shape[1])
-                or (ne == 3 and sdes.shape != s.shape)
-            ):
-                return -1  # the callbacks say what is wrong
-            idx = self._index(selec, s.shape[0])
-            k = idx.shape[0]
-            if r + k > A.shape[0]:
-                raise BufferFull
-            kernel(s, sdes, J, idx, A, b, r, gain)
-            return k
+        def bind(at: tuple[int, ...]) -> Gather:
+            aSel, aJ, aS = at[:3]
+            aRef = at[3] if ne == 3 else -1
 
-        return RowWriter((*error._srcs, *jacobian._srcs), write)
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                selec, s, J = v[o], v[o + 1], v[o + ne + 1]
+                if type(s) is not ndarray or type(J) is not ndarray or s.ndim != 1 or J.ndim != 2:
+                    return False  # the callbacks say what is wrong
+                if ne == 3:
+                    sdes = v[o + 2]
+                    if type(sdes) is not ndarray or sdes.ndim != 1:
+                        return False
+                    args[aRef] = sdes
+                args[aSel] = self._index(selec, s.shape[0])
+                args[aJ], args[aS] = J, s
+                return True
+
+            return gather
+
+        spec = "imvv" if ne == 3 else "imv"  # (selection, J, s[, s*])
+        return RowOp(_rowkernels.GENERIC, spec, (*error._srcs, *jacobian._srcs), bind)
 
     def _errordot(
         self, selec: Flags, s: np.ndarray, sdot: np.ndarray, sdesdot: np.ndarray | None = None
@@ -733,33 +732,33 @@ class FeaturePose(FeatureAbstract):
         rel, R = self._relative(M, Mdes)
         return self._poseJacobian(rel, R, rows, Jq)
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOp(self) -> RowOp | None:
         if self._current or not self._ownCallbacks(FeaturePose):
-            return super()._rowWriter()  # frame("current"), FeaturePoseSE3: the callbacks
-        kernel = _rowkernels.pose_rows
+            return super()._rowOp()  # frame("current"), FeaturePoseSE3: the callbacks
         se3, ndarray = pin.SE3, np.ndarray
         ref: list[Any] = [None, None, None]  # the reference and its arrays, by identity
 
-        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
-            selec, M, Mdes, Jq = v[o], v[o + 1], v[o + 2], v[o + 3]
-            if (
-                type(M) is not se3
-                or type(Mdes) is not se3
-                or type(Jq) is not ndarray
-                or Jq.shape != (6, A.shape[1])
-            ):
-                return -1
-            idx = self._index(selec, 6)
-            k = idx.shape[0]
-            if r + k > A.shape[0]:
-                raise BufferFull
-            if ref[0] is not Mdes:
-                ref[:] = Mdes, Mdes.rotation, Mdes.translation
-            kernel(M.rotation, M.translation, ref[1], ref[2], Jq, idx, A, b, r, gain)
-            return k
+        def bind(at: tuple[int, ...]) -> Gather:
+            aSel, aR, aRd, aJ, ap, apd = at
+
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                selec, M, Mdes, Jq = v[o], v[o + 1], v[o + 2], v[o + 3]
+                if type(M) is not se3 or type(Mdes) is not se3 or type(Jq) is not ndarray:
+                    return False
+                if Jq.ndim != 2:
+                    return False
+                if ref[0] is not Mdes:
+                    ref[:] = Mdes, Mdes.rotation, Mdes.translation
+                args[aSel] = self._index(selec, 6)
+                args[aR], args[ap] = M.rotation, M.translation
+                args[aRd], args[apd] = ref[1], ref[2]
+                args[aJ] = Jq
+                return True
+
+            return gather
 
         # the sources the jacobian callback reads (selec, position, reference, Jq)
-        return RowWriter(self.jacobian._srcs, write)
+        return RowOp(_rowkernels.POSE, "immmvv", self.jacobian._srcs, bind)
 
     def _errordot(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3, nu: np.ndarray) -> np.ndarray:
         rows = self._rows(selec, 6)
@@ -980,30 +979,36 @@ class FeaturePosture(FeatureAbstract):
         self._postureCache = (selec, plan)
         return plan
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOp(self) -> RowOp | None:
         if not self._ownCallbacks(FeaturePosture):
-            return super()._rowWriter()
-        generic = super()._rowWriter()  # joints with a richer configuration
-        kernel = _rowkernels.posture_rows
+            return super()._rowOp()
+        generic = super()._rowOp()  # joints with a richer configuration: the callbacks
+        if generic is None:
+            return None
         ndarray = np.ndarray
 
-        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
-            selec, q, qdes = v[o], v[o + 1], v[o + 2]
-            plan = self._postureIndex(selec)
-            if plan is None or A.shape[1] != self.model.nv:
-                return generic.write(v, o, A, b, r, gain)  # type: ignore[union-attr]
-            if type(q) is not ndarray or type(qdes) is not ndarray:
-                return -1
-            self._check(self.state, q)  # the callbacks' checks, the same errors
-            self._check(self.posture, qdes)
-            iq, iv = plan
-            k = iv.shape[0]
-            if r + k > A.shape[0]:
-                raise BufferFull
-            kernel(q, qdes, iq, iv, A, b, r, gain)
-            return k
+        def bind(at: tuple[int, ...]) -> Gather:
+            aiq, aiv, aq, aqd, aJ, ae = at
+            callbacks = generic.bind((aJ, ae))
 
-        return None if generic is None else RowWriter(generic.sources, write)
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                selec, q, qdes = v[o], v[o + 1], v[o + 2]
+                plan = self._postureIndex(selec)
+                if plan is None or n != self.model.nv:
+                    args[aiv] = CALLBACK_ROWS  # the kernel copies the callbacks' rows
+                    return callbacks(v, o, args, scal, n)
+                if type(q) is not ndarray or type(qdes) is not ndarray:
+                    return False
+                self._check(self.state, q)  # the callbacks' checks, the same errors
+                self._check(self.posture, qdes)
+                args[aiq], args[aiv] = plan
+                args[aq], args[aqd] = q, qdes
+                return True
+
+            return gather
+
+        # (iq, iv, q, q*) for the kernel's formula, or (J, e) from the callbacks
+        return RowOp(_rowkernels.POSTURE, "iivvmv", generic.sources, bind)
 
     def _errordot(
         self, selec: Flags, q: np.ndarray, qdes: np.ndarray, vdes: np.ndarray

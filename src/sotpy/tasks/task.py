@@ -36,7 +36,7 @@ from ..graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, command, pool
 from ..graph.signal import Signal
 from . import _rowkernels
 from .features import FLAGS, FeatureAbstract, Flags
-from .rows import RowWriter, computedByOwnCallback
+from .rows import ALL_COLUMNS, Gather, RowOp, computedByOwnCallback
 
 __all__ = ["Task", "TaskAbstract", "TaskInequality"]
 
@@ -44,47 +44,27 @@ _EMPTY = np.zeros(0)
 _MISSING = object()
 
 
-def _featureWriters(features: list[Any]) -> tuple[list[tuple[Any, int]], list[Any]] | None:
-    """The row writers of ``features`` as ``(write, number of sources)`` pairs and their
-    sources in order; None if one of them has no writer."""
-    parts: list[tuple[Any, int]] = []
-    sources: list[Any] = []
+def _featureOps(features: list[Any]) -> list[RowOp] | None:
+    """The row operations of ``features``, in order; None if one of them has none."""
+    ops = []
     for f in features:
-        w = f._rowWriter()
-        if w is None:
+        op = f._rowOp()
+        if op is None:
             return None
-        parts.append((w.write, len(w)))
-        sources += w.sources
-    return parts, sources
+        ops.append(op)
+    return ops
 
 
-def _writeFeatureRows(
-    parts: list[tuple[Any, int]], v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float
-) -> int:
-    """The features' rows written from row ``r`` (their values from ``v[o:]``); the row
-    after the last, or -1 when a feature declined."""
-    for fn, n in parts:
-        k = fn(v, o, A, b, r, gain)
-        if k < 0:
-            return -1
-        r += k
-        o += n
-    return r
-
-
-def _selectColumns(selec: Flags, A: np.ndarray, r0: int, r: int) -> bool:
-    """Zero the columns of ``A[r0:r]`` that ``selec`` leaves out (the ``jacobian``
-    callback's ``controlSelec``); False when the selection does not fit ``A``."""
-    n = A.shape[1]
+def _columns(selec: Flags, n: int) -> np.ndarray | None:
+    """The columns ``selec`` keeps among ``n`` as the kernel's ``cols`` (``ALL_COLUMNS``
+    for all of them); None when the selection does not fit (the callback says so)."""
     cols = selec._cache.get(n, _MISSING)
     if cols is _MISSING:
         try:
             cols = selec.rows(n)
         except ValueError:
-            return False
-    if cols is not None:
-        A[r0:r] *= selec.mask(n)
-    return True
+            return None
+    return ALL_COLUMNS if cols is None else cols
 
 
 class TaskAbstract(Entity):
@@ -141,10 +121,10 @@ class TaskAbstract(Entity):
             J = J * controlSelec.mask(n)  # a copy, unselected columns zero
         return J
 
-    def _rowWriter(self) -> RowWriter | None:
-        """How an SOT writes this task's rows straight into its buffer (see
-        :mod:`sotpy.tasks.rows`); None here: a task class without a writer is read
-        through its ``jacobian`` and target signals."""
+    def _rowOps(self) -> list[RowOp] | None:
+        """How an SOT writes this task's rows straight into its buffer: its features'
+        row operations, then its own (see :mod:`sotpy.tasks.rows`); None here: a task
+        class without them is read through its ``jacobian`` and target signals."""
         return None
 
     @Output(VECTOR, timeDependent=False)
@@ -358,11 +338,12 @@ class Task(TaskAbstract):
     def _wireOutputs(self) -> None:
         self.task.setDependencies([self.controlGain, self.error, *self._withDerivativeDeps()])
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOps(self) -> list[RowOp] | None:
         """How an SOT writes this task's rows (``J``, ``-controlGain e``) straight into
-        its buffer, from its features' inputs (see :mod:`sotpy.tasks.rows`); None when
-        it must read ``jacobian`` and ``task`` (a derivative feed-forward, an output
-        set to a constant or given another callback, a feature without a writer)."""
+        its buffer, from its features' inputs (see :mod:`sotpy.tasks.rows`): the
+        features' operations, then an ``EQUALITY`` one; None when it must read
+        ``jacobian`` and ``task`` (a derivative feed-forward, an output set to a
+        constant or given another callback, a feature without an operation)."""
         if (
             self._withDerivative
             or not self._features
@@ -371,27 +352,31 @@ class Task(TaskAbstract):
             or not computedByOwnCallback(self.task, Task.task.fn)
         ):
             return None
-        found = _featureWriters(self._features)
-        if found is None:
+        ops = _featureOps(self._features)
+        if ops is None:
             return None
-        parts, sources = found
-        sources = [self.controlSelec, self.controlGain, *sources]
-        isfinite = math.isfinite
 
-        def write(v: Any, o: int, A: np.ndarray, b: np.ndarray, r: int, gain: float) -> int:
-            selec, gain = v[o], v[o + 1]
-            if type(gain) is not float or not (gain >= 0.0 and isfinite(gain)):
-                return -1  # the task callback says what is wrong
-            r0 = r
-            r = _writeFeatureRows(parts, v, o + 2, A, b, r, gain)
-            if r < 0 or not _selectColumns(selec, A, r0, r):
-                return -1
-            t = b[r0:r]
-            if not isfinite(t.dot(t)) and not np.isfinite(t).all():
-                return -1  # a target that overflowed: the task callback names it
-            return r - r0
+        def bind(at: tuple[int, ...]) -> Gather:
+            sGain, aCols = at
 
-        return RowWriter(sources, write)
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                gain = v[o + 1]
+                if type(gain) is not float:
+                    return False  # the kernel checks its range; the callback says why
+                cols = _columns(v[o], n)
+                if cols is None:
+                    return False
+                scal[sGain] = gain
+                args[aCols] = cols
+                return True
+
+            return gather
+
+        # (gain, columns)
+        return [
+            *ops,
+            RowOp(_rowkernels.EQUALITY, "si", (self.controlSelec, self.controlGain), bind),
+        ]
 
 
 class TaskInequality(TaskAbstract):
@@ -444,15 +429,15 @@ class TaskInequality(TaskAbstract):
         self.lower.setDependencies(deps)
         self.upper.setDependencies(deps)
 
-    def _rowWriter(self) -> RowWriter | None:
+    def _rowOps(self) -> list[RowOp] | None:
         """How an SOT writes this task's rows (``J``, ``lower``, ``upper``) straight into
-        its buffers, from its features' inputs (see :mod:`sotpy.tasks.rows`; the write
-        takes both bound buffers: ``write(values, o, A, lower, upper, r)``); None when
-        it must read ``jacobian``, ``lower`` and ``upper`` (a derivative feed-forward, an
-        output set to a constant or given another callback, a feature without a
-        writer). Anything out of the ordinary (a gain or period out of range, bounds of
-        the wrong size, an overflow) makes the write answer -1: the SOT then reads the
-        signals, whose callbacks name the error."""
+        its buffers, from its features' inputs (see :mod:`sotpy.tasks.rows`): the
+        features' operations, then an ``INEQUALITY`` one; None when it must read
+        ``jacobian``, ``lower`` and ``upper`` (a derivative feed-forward, an output set
+        to a constant or given another callback, a feature without an operation).
+        Anything out of the ordinary (a gain or period out of range, bounds of the
+        wrong size, an overflow) makes the program refuse the tick: the SOT then reads
+        the signals, whose callbacks name the error."""
         if (
             self._withDerivative
             or not self._features
@@ -462,50 +447,46 @@ class TaskInequality(TaskAbstract):
             or not computedByOwnCallback(self.upper, TaskInequality.upper.fn)
         ):
             return None
-        if _rowkernels.inequality_bounds is None:  # no numba: the signals
+        ops = _featureOps(self._features)
+        if ops is None:
             return None
-        found = _featureWriters(self._features)
-        if found is None:
-            return None
-        parts, sources = found
-        sources = [
-            self.controlSelec, self.referenceInf, self.referenceSup, self.controlGain, self.dt,
-            *sources,
-        ]  # fmt: skip
         isfinite = math.isfinite
         inf_ = math.inf
-        bounds = _rowkernels.inequality_bounds
-        ndarray, f64 = np.ndarray, np.dtype(np.float64)
+        ndarray = np.ndarray
 
-        def write(v: Any, o: int, A: np.ndarray, lo: np.ndarray, up: np.ndarray, r: int) -> int:
-            selec, rinf, rsup, k, dt = v[o : o + 5]
-            if type(k) is not float or type(dt) is not float or not (0.0 < k < inf_):
-                return -1
-            if not 0.0 < dt < inf_:
-                return -1
-            c = k / dt
-            if not isfinite(c):
-                return -1
-            for ref in (rinf, rsup):
-                if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype != f64:
-                    return -1
-            # the kernel takes contiguous vectors (a source may hand out a strided view)
-            if not rinf.flags.c_contiguous:
-                rinf = np.ascontiguousarray(rinf)
-            if not rsup.flags.c_contiguous:
-                rsup = np.ascontiguousarray(rsup)
-            r0 = r
-            r = _writeFeatureRows(parts, v, o + 5, A, lo, r, c)  # J and -c e
-            if r < 0:
-                return -1
-            # lo, up = -c e + c (referenceInf, referenceSup), the references checked
-            if bounds(rinf, rsup, c, lo, up, r0, r - r0) < 0:
-                return -1
-            if not _selectColumns(selec, A, r0, r):
-                return -1
-            return r - r0
+        def bind(at: tuple[int, ...]) -> Gather:
+            sC, aInf, aSup, aCols = at
 
-        return RowWriter(sources, write)
+            def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
+                selec, rinf, rsup, k, dt = v[o : o + 5]
+                if type(k) is not float or type(dt) is not float or not (0.0 < k < inf_):
+                    return False
+                if not 0.0 < dt < inf_:
+                    return False
+                c = k / dt
+                if not isfinite(c):
+                    return False
+                for ref in (rinf, rsup):
+                    if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype.char != "d":
+                        return False
+                cols = _columns(selec, n)
+                if cols is None:
+                    return False
+                scal[sC] = c
+                args[aInf], args[aSup], args[aCols] = rinf, rsup, cols
+                return True
+
+            return gather
+
+        sources = (
+            self.controlSelec,
+            self.referenceInf,
+            self.referenceSup,
+            self.controlGain,
+            self.dt,
+        )
+        # (k / dt, referenceInf, referenceSup, columns)
+        return [*ops, RowOp(_rowkernels.INEQUALITY, "svvi", sources, bind)]
 
     def _bounds(
         self,
