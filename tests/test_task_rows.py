@@ -449,6 +449,19 @@ def test_feature_posture_operation_raises_the_callbacks_errors(humanoid):
     assert "fposture" in str(fused.value)
     f.posture.value = pin.neutral(humanoid)
     assert run_ops(op, humanoid.nv)[0] == humanoid.nv - 6
+    # a state whose quaternion is not normalised: the callbacks' error, word for word
+    q = f.state.value.copy()
+    good = q.copy()
+    q[3:7] *= 1.01
+    f.state.value = q
+    with pytest.raises(SignalTypeError) as fused:
+        run_ops(op, humanoid.nv)
+    with pytest.raises(SignalTypeError) as plain:
+        f.error.value  # noqa: B018
+    assert str(fused.value) == str(plain.value)
+    assert "not normalised" in str(fused.value)
+    f.state.value = good
+    assert run_ops(op, humanoid.nv)[0] == humanoid.nv - 6
     # a buffer of another width: the callbacks' rows, which do not fit it
     assert run_ops(op, 3)[0] == rk.REFUSED
 

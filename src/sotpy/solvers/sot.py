@@ -115,7 +115,7 @@ class SOT(Entity):
             ["sotpy.solvers._activeset_jit", "sotpy.tasks._rowkernels"],
         )
         self._solver = HierarchySolver()
-        self.lastResult: Any = None
+        self._last: list[Any] = [None]  # lastResult (set in place at every tick)
         self._warned = False
         self._budgetWarned = False
         #: ticks whose solve stopped at its iteration or time budget
@@ -146,6 +146,16 @@ class SOT(Entity):
         self._rewire()
         self._fuse = False
         self.setTaskFusion(_rowkernels.write_rows is not None)
+
+    @property
+    def lastResult(self) -> Any:
+        """The solver's result of the last evaluation of ``control`` (a
+        :class:`~sotpy.solvers.hierarchy.HierarchyResult`; None before the first)."""
+        return self._last[0]
+
+    @lastResult.setter
+    def lastResult(self, result: Any) -> None:
+        self._last[0] = result
 
     @property
     def nv(self) -> int:
@@ -480,7 +490,7 @@ class SOT(Entity):
 
     def _accept(self, result: Any) -> np.ndarray:
         """Keep ``result`` as ``lastResult``, warn about an infeasible hard level."""
-        self.lastResult = result
+        self._last[0] = result
         hard = self._jointLimits or self._stack[0].isInequality
         if hard and not result.feasible:
             if not self._warned:

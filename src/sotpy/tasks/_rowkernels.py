@@ -91,7 +91,7 @@ def _jlog3(w, theta, J):  # pragma: no cover - compiled
 POSE, GENERIC, POSTURE, ROWS, EQUALITY, INEQUALITY, LIMITS, LEVEL = range(8)
 #: How many matrices, vectors and index vectors one call takes (a longer program is
 #: cut into several calls, see :class:`.rows.RowProgram`).
-MATS, VECS, INTS = 12, 16, 12
+MATS, VECS, INTS = 12, 8, 12
 #: Width of a program's ``code`` rows: the kind, then up to six fields.
 FIELDS = 7
 
@@ -104,7 +104,7 @@ RESIZED = -3  # a level's size differs from ``ends`` (with ``fixed``)
 def _write_rows(  # pragma: no cover - compiled
     code, scal, state, A, lo, up, ends, fixed,
     m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11,
-    v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15,
+    v0, v1, v2, v3, v4, v5, v6, v7,
     i0, i1, i2, i3, i4, i5, i6, i7, i8, i9, i10, i11,
 ):  # fmt: skip
     """Run the operations ``code`` (one per row: ``code[op, 0]`` its kind, then its
@@ -117,8 +117,9 @@ def _write_rows(  # pragma: no cover - compiled
     A feature's operation writes its selected rows ``k``: the Jacobian row into ``A``
     and its error ``e_k`` into ``lo``.
 
-    * ``POSE (sel, R, R*, Jq, p, p*)``: FeaturePose. ``Mr = (R*^T R, R*^T (p - p*))``,
-      ``e = (p_r, log3(R_r))``, ``J = diag(R_r, Jlog3(R_r)) Jq``.
+    * ``POSE (sel, H, H*, Jq)``: FeaturePose, ``H`` and ``H*`` the homogeneous
+      matrices of ``M = (R, p)`` and ``M* = (R*, p*)``. ``Mr = (R*^T R, R*^T (p -
+      p*))``, ``e = (p_r, log3(R_r))``, ``J = diag(R_r, Jlog3(R_r)) Jq``.
     * ``GENERIC (sel, J, s, s*)``: FeatureGeneric. ``J_k``, ``e_k = s_k - s*_k``
       (``s_k`` without ``s*``).
     * ``POSTURE (iq, iv, q, q*, J, e)``: FeaturePosture's one-DoF joints. Row ``iv_i``
@@ -149,7 +150,7 @@ def _write_rows(  # pragma: no cover - compiled
     :data:`RESIZED`; the rows written so far are then not to be used.
     """
     mats = (m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11)
-    vecs = (v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15)
+    vecs = (v0, v1, v2, v3, v4, v5, v6, v7)
     ints = (i0, i1, i2, i3, i4, i5, i6, i7, i8, i9, i10, i11)
     n = A.shape[1]
     cap = A.shape[0]
@@ -173,10 +174,10 @@ def _write_rows(  # pragma: no cover - compiled
         if kind == POSTURE and ints[f2].shape[0] == 1 and ints[f2][0] < 0:
             kind, f1, f2 = ROWS, f5, f6  # the rows its callbacks computed
         if kind == POSE:
-            sel, R, Rd, Jq, p, pd = ints[f1], mats[f2], mats[f3], mats[f4], vecs[f5], vecs[f6]
-            if Jq.shape[0] != 6 or Jq.shape[1] != n or R.shape[0] != 3 or R.shape[1] != 3:
+            sel, H, Hd, Jq = ints[f1], mats[f2], mats[f3], mats[f4]
+            if Jq.shape[0] != 6 or Jq.shape[1] != n:
                 return REFUSED
-            if Rd.shape[0] != 3 or Rd.shape[1] != 3 or p.shape[0] != 3 or pd.shape[0] != 3:
+            if H.shape[0] != 4 or H.shape[1] != 4 or Hd.shape[0] != 4 or Hd.shape[1] != 4:
                 return REFUSED
             k = sel.shape[0]
             if r + k > cap:
@@ -187,14 +188,15 @@ def _write_rows(  # pragma: no cover - compiled
                     return REFUSED
                 if sel[i] >= 3:
                     rot = True
+            # R = H[:3, :3], p = H[:3, 3] (and R*, p* from H*)
             for i in range(3):
                 for j in range(3):
-                    Rr[i, j] = Rd[0, i] * R[0, j] + Rd[1, i] * R[1, j] + Rd[2, i] * R[2, j]
+                    Rr[i, j] = Hd[0, i] * H[0, j] + Hd[1, i] * H[1, j] + Hd[2, i] * H[2, j]
             for i in range(3):
                 e[i] = (
-                    Rd[0, i] * (p[0] - pd[0])
-                    + Rd[1, i] * (p[1] - pd[1])
-                    + Rd[2, i] * (p[2] - pd[2])
+                    Hd[0, i] * (H[0, 3] - Hd[0, 3])
+                    + Hd[1, i] * (H[1, 3] - Hd[1, 3])
+                    + Hd[2, i] * (H[2, 3] - Hd[2, 3])
                 )
             if rot:
                 theta = _log3_c(Rr, e[3:])
@@ -335,13 +337,14 @@ def _write_rows(  # pragma: no cover - compiled
             closes = True
         else:
             return REFUSED
-        # the Jacobian rows written by this operation: finite (a sum of squares that is)
-        ss = 0.0
-        for i in range(r0, r):
-            for j in range(n):
-                ss += A[i, j] * A[i, j]
-        if not math.isfinite(ss):
-            return REFUSED
+        if kind in (POSE, GENERIC, ROWS, LEVEL):  # not the identity's rows
+            # the Jacobian rows written by this operation: finite (a sum of squares that is)
+            ss = 0.0
+            for i in range(r0, r):
+                for j in range(n):
+                    ss += A[i, j] * A[i, j]
+            if not math.isfinite(ss):
+                return REFUSED
         if closes:
             if fixed:
                 if lev >= ends.shape[0] or ends[lev] != r:
@@ -396,13 +399,13 @@ PAD = (
 
 def warm_up() -> None:
     """Compile (or load from the cache) ``write_rows`` for the argument types it is
-    given (see :func:`_padding`; the rows go to a strided view, as into the solver's
-    stacked ``[A | -ref]``), then forbid further compilation: an unforeseen type (an
+    given (see :func:`_padding`; the rows go to C-ordered arrays, the solver's stacked
+    buffers and the SOT's own), then forbid further compilation: an unforeseen type (an
     integer Jacobian) raises ``TypeError`` at the call and the caller goes back to the
     signals, instead of compiling mid-loop."""
     if write_rows is None or _warm:
         return
-    A = np.zeros((6, 3))[:, :2]
+    A = np.zeros((6, 2))
     b = np.zeros(6)
     code = np.full((1, FIELDS), -1, dtype=np.int64)
     code[0, 0] = LIMITS

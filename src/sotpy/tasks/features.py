@@ -616,7 +616,7 @@ class FeaturePose(FeatureAbstract):
 
     def __init__(self, name: str) -> None:
         self._D = np.zeros((6, 6))  # buffer of _poseJacobian (off-diagonal blocks: 0)
-        self._rel: tuple[Any, ...] = (None, None, None, None)
+        self._rel: list[Any] = [None, None, None, None]  # (M, M*, Mr, R) of the last tick
         self._splitCache: tuple[Any, ...] = (_MISSING, None, None)
         self._current = False  # frame("current"): SoT's error of M* seen from M
         super().__init__(name)
@@ -658,7 +658,7 @@ class FeaturePose(FeatureAbstract):
             return c[2], c[3]
         rel = Mdes.actInv(M)
         R = rel.rotation if self._usesRotation else None
-        self._rel = (M, Mdes, rel, R)
+        c[:] = M, Mdes, rel, R  # in place: no entity attribute set per tick
         return rel, R
 
     # the two variants differ only in these three functions of Mr (and R = its rotation)
@@ -736,10 +736,11 @@ class FeaturePose(FeatureAbstract):
         if self._current or not self._ownCallbacks(FeaturePose):
             return super()._rowOp()  # frame("current"), FeaturePoseSE3: the callbacks
         se3, ndarray = pin.SE3, np.ndarray
-        ref: list[Any] = [None, None, None]  # the reference and its arrays, by identity
 
         def bind(at: tuple[int, ...]) -> Gather:
-            aSel, aR, aRd, aJ, ap, apd = at
+            aSel, aH, aHd, aJ = at
+            ref: list[Any] = [None, None]  # the reference and its matrix, by identity
+            rows: list[Any] = [None, None]  # the selection and its rows, by identity
 
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 selec, M, Mdes, Jq = v[o], v[o + 1], v[o + 2], v[o + 3]
@@ -748,17 +749,16 @@ class FeaturePose(FeatureAbstract):
                 if Jq.ndim != 2:
                     return False
                 if ref[0] is not Mdes:
-                    ref[:] = Mdes, Mdes.rotation, Mdes.translation
-                args[aSel] = self._index(selec, 6)
-                args[aR], args[ap] = M.rotation, M.translation
-                args[aRd], args[apd] = ref[1], ref[2]
-                args[aJ] = Jq
+                    ref[0], ref[1] = Mdes, Mdes.homogeneous
+                if rows[0] is not selec:
+                    rows[0], rows[1] = selec, self._index(selec, 6)
+                args[aSel], args[aH], args[aHd], args[aJ] = rows[1], M.homogeneous, ref[1], Jq
                 return True
 
             return gather
 
         # the sources the jacobian callback reads (selec, position, reference, Jq)
-        return RowOp(_rowkernels.POSE, "immmvv", self.jacobian._srcs, bind)
+        return RowOp(_rowkernels.POSE, "immm", self.jacobian._srcs, bind)
 
     def _errordot(self, selec: Flags, M: pin.SE3, Mdes: pin.SE3, nu: np.ndarray) -> np.ndarray:
         rows = self._rows(selec, 6)
@@ -985,7 +985,8 @@ class FeaturePosture(FeatureAbstract):
         generic = super()._rowOp()  # joints with a richer configuration: the callbacks
         if generic is None:
             return None
-        ndarray = np.ndarray
+        ndarray, model, isNormalized = np.ndarray, self.model, pin.isNormalized
+        nv, shape, unit = model.nv, (model.nq,), self._hasUnitNorm
 
         def bind(at: tuple[int, ...]) -> Gather:
             aiq, aiv, aq, aqd, aJ, ae = at
@@ -993,14 +994,18 @@ class FeaturePosture(FeatureAbstract):
 
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 selec, q, qdes = v[o], v[o + 1], v[o + 2]
-                plan = self._postureIndex(selec)
-                if plan is None or n != self.model.nv:
+                c = self._postureCache
+                plan = c[1] if c is not None and c[0] is selec else self._postureIndex(selec)
+                if plan is None or n != nv:
                     args[aiv] = CALLBACK_ROWS  # the kernel copies the callbacks' rows
                     return callbacks(v, o, args, scal, n)
                 if type(q) is not ndarray or type(qdes) is not ndarray:
                     return False
-                self._check(self.state, q)  # the callbacks' checks, the same errors
-                self._check(self.posture, qdes)
+                # the callbacks' checks, the same errors (the posture: once per array)
+                if q.shape != shape or (unit and not isNormalized(model, q, 1e-6)):
+                    self._check(self.state, q)
+                if qdes is not self._checked:
+                    self._check(self.posture, qdes)
                 args[aiq], args[aiv] = plan
                 args[aq], args[aqd] = q, qdes
                 return True

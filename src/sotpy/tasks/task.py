@@ -359,15 +359,18 @@ class Task(TaskAbstract):
         def bind(at: tuple[int, ...]) -> Gather:
             sGain, aCols = at
 
+            known: list[Any] = [None, 0, None]  # the selection, n and its columns
+
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
-                gain = v[o + 1]
+                selec, gain = v[o], v[o + 1]
                 if type(gain) is not float:
                     return False  # the kernel checks its range; the callback says why
-                cols = _columns(v[o], n)
-                if cols is None:
+                if known[0] is not selec or known[1] != n:
+                    known[:] = selec, n, _columns(selec, n)
+                if known[2] is None:
                     return False
                 scal[sGain] = gain
-                args[aCols] = cols
+                args[aCols] = known[2]
                 return True
 
             return gather
@@ -457,6 +460,9 @@ class TaskInequality(TaskAbstract):
         def bind(at: tuple[int, ...]) -> Gather:
             sC, aInf, aSup, aCols = at
 
+            # the references, the selection, n and its columns of the last tick
+            known: list[Any] = [None, None, None, 0, None]
+
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 selec, rinf, rsup, k, dt = v[o : o + 5]
                 if type(k) is not float or type(dt) is not float or not (0.0 < k < inf_):
@@ -466,14 +472,17 @@ class TaskInequality(TaskAbstract):
                 c = k / dt
                 if not isfinite(c):
                     return False
-                for ref in (rinf, rsup):
-                    if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype.char != "d":
-                        return False
-                cols = _columns(selec, n)
-                if cols is None:
+                if known[0] is not rinf or known[1] is not rsup:
+                    for ref in (rinf, rsup):
+                        if type(ref) is not ndarray or ref.ndim != 1 or ref.dtype.char != "d":
+                            return False
+                    known[0], known[1] = rinf, rsup
+                if known[2] is not selec or known[3] != n:
+                    known[2:] = selec, n, _columns(selec, n)
+                if known[4] is None:
                     return False
                 scal[sC] = c
-                args[aInf], args[aSup], args[aCols] = rinf, rsup, cols
+                args[aInf], args[aSup], args[aCols] = rinf, rsup, known[4]
                 return True
 
             return gather
