@@ -547,7 +547,7 @@ class SOT(Entity):
             return None
         program = RowProgram(ops)
         equalities = (False,) * self._jointLimits + tuple(not t.isInequality for t in self._stack)
-        solve = functools.partial(self._solveFused, program, equalities)
+        solve = functools.partial(self._solveFused, program, equalities, all(equalities))
         return (self.damping, *program.sources), solve
 
     def _limitsOp(self) -> RowOp:
@@ -587,12 +587,17 @@ class SOT(Entity):
         return self._solve(tuple(s.value for s in self.control._deps))
 
     def _solveFused(
-        self, program: RowProgram, equalities: tuple[bool, ...], damping: Any, *values: Any
+        self,
+        program: RowProgram,
+        equalities: tuple[bool, ...],
+        equalityOnly: bool,
+        damping: Any,
+        *values: Any,
     ) -> np.ndarray:
         """The control, the rows written by ``program``: in place into the solver's
         buffers when the level sizes are those of the previous tick, else into the
         SOT's own buffers and solved as levels. ``equalities`` says which levels are
-        equalities. Anything the program refuses goes through the signals."""
+        equalities (``equalityOnly``: all of them). Anything the program refuses goes through the signals."""
         if type(damping) is not float or not 0.0 <= damping < math.inf:
             return self._fromSignals()  # the damping's own error
         lams: Any = 0.0
@@ -610,7 +615,7 @@ class SOT(Entity):
                 r = program.run(values, A, lo, up, known[2], True)
                 if r >= 0:
                     try:
-                        result = solver.solve_stacked(lams, equality=all(equalities))
+                        result = solver.solve_stacked(lams, equality=equalityOnly)
                     except SotpyError:
                         return self._fromSignals()  # the checks of solve() name it
                     return self._accept(result)
