@@ -597,7 +597,8 @@ class SOT(Entity):
         """The control, the rows written by ``program``: in place into the solver's
         buffers when the level sizes are those of the previous tick, else into the
         SOT's own buffers and solved as levels. ``equalities`` says which levels are
-        equalities (``equalityOnly``: all of them). Anything the program refuses goes through the signals."""
+        equalities (``equalityOnly``: all of them). Anything the program refuses goes
+        through the signals."""
         if type(damping) is not float or not 0.0 <= damping < math.inf:
             return self._fromSignals()  # the damping's own error
         lams: Any = 0.0
