@@ -42,9 +42,10 @@ joint-limit level itself is always feasible: its bounds are clipped so that
 
 In a running loop (a compiled plan) the SOT reads each task from its features' inputs
 and writes ``J`` and ``-lambda e`` (a ``TaskInequality``: ``J`` and both bounds) straight
-into the rows it hands to the solver
-(:mod:`sotpy.tasks.rows`), instead of one plan step per feature and task signal; the
-dependencies of ``control``, the task signals and the control are unchanged.
+into the rows it hands to the solver, with the joint-limit level, in one compiled call
+of a row program (:mod:`sotpy.tasks.rows`), instead of one plan step per feature and
+task signal; the dependencies of ``control``, the task signals and the control are
+unchanged.
 ``setTaskFusion(False)`` reads every task through its signals.
 """
 
@@ -122,9 +123,9 @@ class SOT(Entity):
         self.budgetHits = 0
         self._limits: tuple[Any, ...] | None = None
         self._taskDamping: dict[str, float] = {}
-        # (fused plan, level sizes) of the last tick solved through _fusedLevels: the
-        # next ticks of that plan write in place into the solver's buffers
-        self._inPlace: tuple[Any, tuple[int, ...]] | None = None
+        # (row program, level sizes, level ends) of the last tick written into the SOT's
+        # own buffers: the next ticks of that program write in place into the solver's
+        self._inPlace: tuple[Any, tuple[int, ...], np.ndarray] | None = None
         # one-dimensional joints: their index in q and in v
         iq, iv = [], []
         if model is not None:
