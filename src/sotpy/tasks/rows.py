@@ -8,7 +8,7 @@ stack), each building its own arrays. A :class:`RowProgram` computes the same nu
 from the signals those outputs read (the features' inputs: placements, Jacobians,
 selections, references; the task's gain, references and column selection) and writes
 every level, the joint limits included, into the solver's buffers in **one** call of
-a compiled kernel (:func:`sotpy.tasks._rowkernels.write_rows`).
+a compiled kernel (``sotpy.tasks._rowkernels.write_rows``).
 
 A program is a list of :class:`RowOp`: one per feature (its rows and error), one per
 task (its gain or bounds, closing its level), one for the joint limits and one for
@@ -29,7 +29,7 @@ Rules that keep it exact (see ``docs/tasks.md``):
   brings them up to date), so it sees the same inputs at the same tick;
 * anything a gather or the kernel does not recognise (a type, a shape, a gain out of
   range, a value that is not finite) makes the program answer
-  :data:`~sotpy.tasks._rowkernels.REFUSED`: the SOT then reads the task signals for
+  ``_rowkernels.REFUSED``: the SOT then reads the task signals for
   that tick, whose callbacks raise the errors that name the task and the feature;
 * the bypassed signals keep their callbacks: reading one (the shell, a tracer, a
   ``GainAdaptive``) computes it as before.
