@@ -14,7 +14,7 @@ A program is a list of :class:`RowOp`: one per feature (its rows and error), one
 task (its gain or bounds, closing its level), one for the joint limits and one for
 each task read through its signals. Each operation hands the kernel a few arrays:
 its *gather*, a small Python function called at every tick, takes them from the
-signal values (``M.rotation``, a Jacobian, a selection's indices) and puts them in
+signal values (``M.homogeneous``, a Jacobian, a selection's indices) and puts them in
 the call's argument list; nothing is copied. Measured on the tutorial's humanoid
 graph (docs/tutorial-reach.md): one kernel call per feature and per task, with each
 writer's Python checks, cost 21 us of a 96 us tick; the program costs about 13 us
