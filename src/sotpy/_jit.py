@@ -86,7 +86,7 @@ ENABLED: bool = _numba is not None and MODE != "off"
 #: machine, in seconds (what the announcement quotes; a faster machine takes less)
 EXPECTED_SECONDS = {
     "sotpy.solvers._activeset_jit": 35.0,
-    "sotpy.tasks._rowkernels": 10.0,
+    "sotpy.tasks._rowkernels": 5.0,
     "sotpy.dynamics.device": 3.0,
     "sotpy.solvers.wbc._kernels": 12.0,
     "sotpy.tasks._collisionkernels": 5.0,
