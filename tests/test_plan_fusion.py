@@ -29,7 +29,15 @@ from sotpy.errors import CommandError, SotpyError, SotpyWarning, UnpluggedError
 from sotpy.graph import DOUBLE, MATRIX, VECTOR, Entity, Input, Output, Plan, compilePlan, plug, pool
 from sotpy.graph.tracer import Tracer
 from sotpy.solvers import SOT
-from sotpy.tasks import FeatureGeneric, FeaturePose, FeaturePosture, Task, TaskInequality
+from sotpy.tasks import (
+    FeatureGeneric,
+    FeaturePose,
+    FeaturePosture,
+    FeatureVisualPoint,
+    Flags,
+    Task,
+    TaskInequality,
+)
 from sotpy.tasks import _rowkernels as rk
 from sotpy.tasks.rows import RowProgram
 
@@ -890,3 +898,116 @@ def test_fused_inequality_task_declines_bad_bounds_and_the_signals_name_them(ben
     assert errors[ON] == errors[OFF] and "referenceSup" in errors[ON]
     worst, _ = _max_diff(on, off, 5)
     assert worst < 1e-10 and on.sot.getTaskFusion()
+
+
+# -- random stacks: the row program against the signals ------------------------------------
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.standard_normal(4)
+    q /= np.linalg.norm(q)
+    return pin.Quaternion(q[3], q[0], q[1], q[2]).matrix()
+
+
+def _random_flags(rng: np.random.Generator, n: int, p: float = 0.6) -> Flags:
+    keep = rng.random(n) < p
+    keep[rng.integers(n)] = True  # at least one row
+    return Flags(keep)
+
+
+def _random_feature(rng, p: str, name: str, robot, kind: str):
+    """A feature of ``kind`` with random inputs (constants; the posture reads the device)."""
+    nv = robot.model.nv
+    if kind == "pose":
+        f = FeaturePose(p + name)
+        f.position.value = pin.SE3(_random_rotation(rng), rng.standard_normal(3))
+        f.reference.value = pin.SE3(_random_rotation(rng), rng.standard_normal(3))
+        f.Jq.value = rng.standard_normal((6, nv))
+        f.selec.value = _random_flags(rng, 6)
+    elif kind in ("generic", "generic+ref"):
+        m = int(rng.integers(1, 7))
+        f = FeatureGeneric(p + name)
+        f.errorIN.value = rng.standard_normal(m)
+        f.jacobianIN.value = rng.standard_normal((m, nv))
+        f.selec.value = _random_flags(rng, m)
+        if kind == "generic+ref":
+            ref = FeatureGeneric(p + name + "_des")
+            ref.errorIN.value = rng.standard_normal(m)
+            f.setReference(ref)
+    elif kind == "visual":
+        f = FeatureVisualPoint(p + name)
+        f.xy.value = rng.uniform(-0.3, 0.3, 2)
+        f.Z.value = float(rng.uniform(0.5, 2.0))
+        f.Jq.value = rng.standard_normal((6, nv))
+        f.xyRef.value = rng.uniform(-0.3, 0.3, 2)
+    else:  # a posture, over a few DoFs; the free flyer's among them: its callbacks
+        f = FeaturePosture(p + name, robot.model)
+        plug(robot.device.state, f.state)
+        f.posture.value = pin.integrate(
+            robot.model, robot.device.state.value, 0.1 * rng.standard_normal(nv)
+        )
+        first = 0 if kind == "posture+base" else 6
+        f.selec.value = Flags([i >= first and rng.random() < 0.5 for i in range(nv)]).set(7)
+    return f
+
+
+KINDS = ["pose", "generic", "generic+ref", "visual", "posture", "posture+base"]
+
+
+def _random_stack(rng, p: str, robot, sot, n_tasks: int) -> list:
+    tasks = []
+    for i in range(n_tasks):
+        kinds = rng.choice(KINDS, size=int(rng.integers(1, 4)))
+        inequality = rng.random() < 0.35
+        t = (TaskInequality if inequality else Task)(f"{p}t{i}")
+        for j, kind in enumerate(kinds):
+            t.add(_random_feature(rng, p, f"f{i}_{j}", robot, str(kind)))
+        if rng.random() < 0.3:
+            t.controlSelec.value = _random_flags(rng, robot.model.nv, 0.8)
+        if inequality:
+            m = t.error.value.shape[0]
+            e = t.error.value
+            lo = e - rng.uniform(-0.1, 1.0, m)
+            up = lo + rng.uniform(0.0, 2.0, m)
+            lo[rng.random(m) < 0.2] = -np.inf
+            t.referenceInf.value = lo
+            t.referenceSup.value = up if rng.random() < 0.8 else np.zeros(0)
+            t.dt.value = DT
+            t.controlGain.value = float(rng.uniform(0.1, 1.0))
+        else:
+            t.controlGain.value = float(rng.uniform(0.1, 20.0))
+        if rng.random() < 0.15:  # a feed-forward: this task is read through its signals
+            t.setWithDerivative(True)
+        sot.push(t)
+        tasks.append(t)
+    return tasks
+
+
+@needs_kernels
+@pytest.mark.parametrize("seed", range(16))
+def test_random_stacks_give_the_control_of_their_signals(seed):
+    """Random stacks (1 to 9 tasks of 1 to 3 features of every kind the row program
+    knows, or copies from their callbacks; equality and inequality tasks, column
+    selections, feed-forward tasks read through their signals; the largest cut into
+    several kernel calls) on Nao: at every tick the fused SOT's control is the control
+    of the same stack through its signals."""
+    controls = {}
+    programs = {}
+    for p, fused in ((ON, True), (OFF, False)):
+        rng = np.random.default_rng(seed)
+        r = load_robot("nao", prefix=p + "nao")
+        r.device.setControlType("velocity")
+        sot = SOT(p + "sot", r.dynamic)
+        sot.dt.value = DT
+        sot.setTimeBudget(None)
+        sot.setTaskFusion(fused)
+        _random_stack(rng, p, r, sot, int(rng.integers(1, 10)))
+        plug(sot.control, r.device.control)
+        xs = []
+        for _ in range(4):
+            r.device.increment(DT)
+            xs.append(sot.lastResult.x.copy())
+        controls[p] = np.array(xs)
+        programs[p] = sot._inPlace
+    assert programs[OFF] is None
+    if programs[ON] is not None:  # fused (a stack of feed-forward tasks alone is not)
+        assert programs[ON][0].levels == len(programs[ON][1])
+    np.testing.assert_allclose(controls[ON], controls[OFF], rtol=0, atol=1e-9)
