@@ -533,6 +533,9 @@ def test_task_operations_give_the_task_jacobian_and_target(humanoid):
     ops = t._rowOps()
     assert [made_by(op) for op in ops] == ["POSE", "GENERIC", "POSTURE", "EQUALITY"]
     assert ops[-1].sources == (t.controlSelec, t.controlGain)
+    # a level end array too short for the program: refused (not "no room": no buffer
+    # would do)
+    assert run_ops(ops, humanoid.nv, levels=0)[0] == rk.REFUSED
 
 
 def test_task_operations_zero_the_unselected_columns(humanoid):

@@ -659,8 +659,8 @@ class SOT(Entity):
 
     @command
     def setTaskFusion(self, enabled: bool) -> None:
-        """Evaluate the equality tasks' rows in one pass from their features' inputs
-        (default, with numba), or through each feature's and task's signals (see
+        """Write the stack's rows in one compiled call from the features' inputs
+        (default, with numba), or read each feature's and task's signals (see
         ``docs/tasks.md``, "Fused rows"). The control is the same either way."""
         if enabled and _rowkernels.write_rows is None:
             raise CommandError(

@@ -351,8 +351,8 @@ def _write_rows(  # pragma: no cover - compiled
                     return RESIZED
             elif lev < ends.shape[0]:
                 ends[lev] = r
-            else:
-                return NO_ROOM
+            else:  # more levels than ``ends`` holds: not this program's
+                return REFUSED
             lev += 1
             t0 = r
     state[0], state[1], state[2] = r, t0, lev
