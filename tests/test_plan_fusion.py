@@ -774,7 +774,7 @@ def test_new_limits_are_seen_in_the_same_tick(bench_sot, scenes):
         c.sot.upperVl.value = slow  # a new array, the same plan
     tick_both(on, off, 5)
     assert calls == {"solve": 1, "solve_stacked": 9}
-    assert on.sot._limits[2] is on.sot.upperVl.value
+    assert on.sot._limits.vmax is on.sot.upperVl.value
     x = on.sot.lastResult.x
     assert np.all(np.abs(x[iv]) <= slow[iv] + 1e-9)
     assert np.abs(x[iv]).max() > 0.9 * slow[iv].min()  # the new limits are active

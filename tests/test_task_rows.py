@@ -34,7 +34,7 @@ from sotpy.tasks import (
     TaskInequality,
 )
 from sotpy.tasks import _rowkernels as rk
-from sotpy.tasks.rows import RowOp, RowProgram
+from sotpy.tasks.rows import _KINDS, RowOp, RowProgram
 
 pytestmark = pytest.mark.skipif(rk.write_rows is None, reason="the row kernel needs numba")
 
@@ -175,7 +175,6 @@ def test_jlog3_is_the_derivative_of_log3_along_a_right_perturbation():
 
 
 # -- feature operations ---------------------------------------------------------------
-KIND_NAMES = ("POSE", "GENERIC", "POSTURE", "ROWS", "EQUALITY", "INEQUALITY", "LIMITS", "LEVEL")
 
 
 def values_of(ops: RowOp | list[RowOp]) -> tuple:
@@ -186,7 +185,7 @@ def values_of(ops: RowOp | list[RowOp]) -> tuple:
 def made_by(op: RowOp) -> str:
     """The kernel's operation: ``"POSE"``, ``"GENERIC"``, ``"POSTURE"`` (a formula of
     the kernel) or ``"ROWS"`` (the feature's own callbacks)."""
-    return KIND_NAMES[op.kind]
+    return _KINDS[op.kind]
 
 
 def run_ops(ops, nv: int, rows: int = 40, values=None, levels: int = 1):
@@ -440,13 +439,18 @@ def test_feature_posture_operation_raises_the_callbacks_errors(humanoid):
     rng = np.random.default_rng(0)
     f = posture_feature(humanoid, rng)
     op = f._rowOp()
+
+    def same_error(nv: int) -> str:
+        """The program's error and the error signal's, word for word."""
+        with pytest.raises(SignalTypeError) as fused:
+            run_ops(op, nv)
+        with pytest.raises(SignalTypeError) as plain:
+            f.error.value  # noqa: B018
+        assert str(fused.value) == str(plain.value)
+        return str(fused.value)
+
     f.posture.value = np.zeros(5)
-    with pytest.raises(SignalTypeError) as fused:
-        run_ops(op, humanoid.nv)
-    with pytest.raises(SignalTypeError) as plain:
-        f.error.value  # noqa: B018
-    assert str(fused.value) == str(plain.value)
-    assert "fposture" in str(fused.value)
+    assert "fposture" in same_error(humanoid.nv)
     f.posture.value = pin.neutral(humanoid)
     assert run_ops(op, humanoid.nv)[0] == humanoid.nv - 6
     # a state whose quaternion is not normalised: the callbacks' error, word for word
@@ -454,12 +458,7 @@ def test_feature_posture_operation_raises_the_callbacks_errors(humanoid):
     good = q.copy()
     q[3:7] *= 1.01
     f.state.value = q
-    with pytest.raises(SignalTypeError) as fused:
-        run_ops(op, humanoid.nv)
-    with pytest.raises(SignalTypeError) as plain:
-        f.error.value  # noqa: B018
-    assert str(fused.value) == str(plain.value)
-    assert "not normalised" in str(fused.value)
+    assert "not normalised" in same_error(humanoid.nv)
     f.state.value = good
     assert run_ops(op, humanoid.nv)[0] == humanoid.nv - 6
     # a buffer of another width: the callbacks' rows, which do not fit it

@@ -54,7 +54,7 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -78,6 +78,25 @@ from .hierarchy import HierarchySolver, checked_max_iter, checked_time_budget
 __all__ = ["SOT"]
 
 _NO_LIMIT = 1e30  # a limit at least this large is no limit
+
+
+class _LimitRows(NamedTuple):
+    """The joint-limit level's rows for one set of limit arrays (see
+    :meth:`SOT._limitRows`): the arrays they came from, the bounded joints' indices in
+    ``q`` and ``v``, their limits (inf where none), ``-vm``, the level's matrix and
+    ``lim = (ql, qu, vm)`` stacked for the row program's ``LIMITS`` operation."""
+
+    lower: Any
+    upper: Any
+    vmax: Any
+    iq: np.ndarray
+    iv: np.ndarray
+    ql: np.ndarray
+    qu: np.ndarray
+    vm: np.ndarray
+    nvm: np.ndarray
+    A: np.ndarray
+    lim: np.ndarray
 
 
 class SOT(Entity):
@@ -121,7 +140,7 @@ class SOT(Entity):
         self._budgetWarned = False
         #: ticks whose solve stopped at its iteration or time budget
         self.budgetHits = 0
-        self._limits: tuple[Any, ...] | None = None
+        self._limits: _LimitRows | None = None
         self._taskDamping: dict[str, float] = {}
         # (row program, level sizes, level ends) of the last tick written into the SOT's
         # own buffers: the next ticks of that program write in place into the solver's
@@ -553,8 +572,7 @@ class SOT(Entity):
 
     def _limitsOp(self) -> RowOp:
         """The joint-limit level as a ``LIMITS`` operation (the rows of
-        :meth:`_limitLevel`, from the limits' rows kept in ``_limits``, made again when
-        a limit changes: that raises the error naming a bad limit)."""
+        :meth:`_limitLevel`, from :meth:`_limitRowsFor`)."""
         ndarray, shape = np.ndarray, self._qShape
 
         def bind(at: tuple[int, ...]) -> Gather:
@@ -562,19 +580,12 @@ class SOT(Entity):
 
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 q, lower, upper, vmax, dt = v[o : o + 5]
-                cache = self._limits
-                if (
-                    cache is None
-                    or cache[0] is not lower
-                    or cache[1] is not upper
-                    or cache[2] is not vmax
-                ):
-                    cache = self._limits = self._limitRows(lower, upper, vmax)  # new limits
+                rows = self._limitRowsFor(lower, upper, vmax)
                 if type(q) is not ndarray or q.shape != shape or type(dt) is not float:
                     return False
                 if not dt > 0.0:
                     return False
-                args[aiq], args[aiv], args[aq], args[alim] = cache[3], cache[9], q, cache[10]
+                args[aiq], args[aiv], args[aq], args[alim] = rows.iq, rows.iv, q, rows.lim
                 scal[sdt] = dt
                 return True
 
@@ -682,11 +693,9 @@ class SOT(Entity):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if not dt > 0:
             raise SignalTypeError(f"{self.dt.name}: the control period must be > 0 s, got {dt}")
-        cache = self._limits
-        if cache is None or cache[0] is not lower or cache[1] is not upper or cache[2] is not vmax:
-            cache = self._limits = self._limitRows(lower, upper, vmax)
-        _, _, _, iq, ql, qu, vm, nvm, A = cache[:9]
-        qj = np.asarray(q)[iq]
+        rows = self._limitRowsFor(lower, upper, vmax)
+        ql, qu, vm, nvm = rows.ql, rows.qu, rows.vm, rows.nvm
+        qj = np.asarray(q)[rows.iq]
         lo = np.subtract(ql, qj)
         lo /= dt
         hi = np.subtract(qu, qj)
@@ -694,11 +703,22 @@ class SOT(Entity):
         # clipped to [-vm, vm] (np.clip costs several times two ufunc calls here)
         np.minimum(np.maximum(lo, nvm, out=lo), vm, out=lo)
         np.minimum(np.maximum(hi, nvm, out=hi), vm, out=hi)
-        return A, lo, hi
+        return rows.A, lo, hi
 
-    def _limitRows(self, lower: Any, upper: Any, vmax: Any) -> tuple[Any, ...]:
-        """What the joint-limit level needs from the limits (they change rarely): the
-        bounded joints, their limits (inf where none) and the level's matrix."""
+    def _limitRowsFor(self, lower: Any, upper: Any, vmax: Any) -> _LimitRows:
+        """The limits' rows for these limit arrays: kept while the same arrays come
+        (they change rarely), made again from new ones (which raises the error naming a
+        bad limit)."""
+        rows = self._limits
+        if rows is None or not (
+            rows.lower is lower and rows.upper is upper and rows.vmax is vmax
+        ):  # by identity: a new array, new rows
+            rows = self._limits = self._limitRows(lower, upper, vmax)
+        return rows
+
+    def _limitRows(self, lower: Any, upper: Any, vmax: Any) -> _LimitRows:
+        """What the joint-limit level needs from the limits: the bounded joints, their
+        limits (inf where none) and the level's matrix."""
         ql, qu = np.asarray(lower)[self._iq], np.asarray(upper)[self._iq]
         vm = np.asarray(vmax)[self._iv]
         # refused where they enter: swapped or NaN limits, a negative velocity limit
@@ -719,6 +739,8 @@ class SOT(Entity):
         A[np.arange(len(rows)), self._iv[rows]] = 1.0
         A.flags.writeable = False
         vm = vm[rows]
-        ql, qu, iv = ql[rows], qu[rows], self._iv[rows]
-        lim = np.array([ql, qu, vm])  # for the row program's LIMITS operation
-        return (lower, upper, vmax, self._iq[rows], ql, qu, vm, -vm, A, iv, lim)
+        ql, qu = ql[rows], qu[rows]
+        lim = np.array([ql, qu, vm])
+        return _LimitRows(
+            lower, upper, vmax, self._iq[rows], self._iv[rows], ql, qu, vm, -vm, A, lim
+        )

@@ -740,7 +740,6 @@ class FeaturePose(FeatureAbstract):
         def bind(at: tuple[int, ...]) -> Gather:
             aSel, aH, aHd, aJ = at
             ref: list[Any] = [None, None]  # the reference and its matrix, by identity
-            rows: list[Any] = [None, None]  # the selection and its rows, by identity
 
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 selec, M, Mdes, Jq = v[o], v[o + 1], v[o + 2], v[o + 3]
@@ -750,9 +749,8 @@ class FeaturePose(FeatureAbstract):
                     return False
                 if ref[0] is not Mdes:
                     ref[0], ref[1] = Mdes, Mdes.homogeneous
-                if rows[0] is not selec:
-                    rows[0], rows[1] = selec, self._index(selec, 6)
-                args[aSel], args[aH], args[aHd], args[aJ] = rows[1], M.homogeneous, ref[1], Jq
+                sel = self._index(selec, 6)
+                args[aSel], args[aH], args[aHd], args[aJ] = sel, M.homogeneous, ref[1], Jq
                 return True
 
             return gather
@@ -994,8 +992,7 @@ class FeaturePosture(FeatureAbstract):
 
             def gather(v: Any, o: int, args: list[Any], scal: np.ndarray, n: int) -> bool:
                 selec, q, qdes = v[o], v[o + 1], v[o + 2]
-                c = self._postureCache
-                plan = c[1] if c is not None and c[0] is selec else self._postureIndex(selec)
+                plan = self._postureIndex(selec)
                 if plan is None or n != nv:
                     args[aiv] = CALLBACK_ROWS  # the kernel copies the callbacks' rows
                     return callbacks(v, o, args, scal, n)
