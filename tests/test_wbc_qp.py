@@ -152,8 +152,9 @@ def test_wrong_guess_is_refused(talos, jit):
     assert np.array_equal(np.sort(qp._active), np.sort(good))
 
 
-def _compiled(layout, A, c, E, f, w, C, lo, hi, reg, act=(), up=(), guess=True):
-    """The compiled kernel on these rows: (status, ok, {name: array}) of its workspace."""
+def _compiled(layout, A, c, E, f, w, C, lo, hi, reg, act=(), up=(), guess=True, unit=()):
+    """The compiled kernel on these rows: (status, ok, {name: array}) of its workspace
+    (``unit``: the rows of the identity, see ``_kernels.solve``)."""
     m, mc = E.shape[0], C.shape[0]
     data = pack(layout, A, c, E, f, w, C, lo, hi)
     lay = _kernels.work_layout(layout.nv, layout.na, layout.n, m, mc)
@@ -161,8 +162,8 @@ def _compiled(layout, A, c, E, f, w, C, lo, hi, reg, act=(), up=(), guess=True):
     act = np.asarray(act, dtype=np.intp)
     up = np.asarray(up, dtype=bool)
     status, ok = _kernels.solve(
-        data, ws, act, up, layout.nv, layout.na, layout.n, m, mc, reg, guess,
-        PRIMAL_TOL, DUAL_TOL, 1e6,
+        data, ws, act, up, np.asarray(unit, dtype=np.intp), layout.nv, layout.na, layout.n,
+        m, mc, reg, guess, PRIMAL_TOL, DUAL_TOL, 1e6,
     )  # fmt: skip
     views = {k: ws[o : o + int(np.prod(sh))].reshape(sh) for k, (o, sh) in lay.items() if sh}
     return status, ok, views

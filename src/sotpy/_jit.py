@@ -450,3 +450,14 @@ def c_float64(a: np.ndarray) -> np.ndarray:
     if a.dtype == np.float64 and a.flags.c_contiguous:
         return a
     return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def any_layout(ndim: int, dtype: type = np.float64) -> np.ndarray:
+    """A read-only array of layout ``A`` (a strided view) of ``ndim`` dimensions: a
+    kernel compiled for it (``warm_up`` calls it with such arrays) takes any array of
+    that dtype and dimension, C or Fortran, writable or not, with one compiled version
+    (numba converts the argument's type at the call). Also what a call pads its unused
+    array positions with."""
+    a = np.zeros((3, 4) if ndim == 2 else 4, dtype=dtype)[..., ::2]
+    a.setflags(write=False)
+    return a

@@ -1,5 +1,8 @@
-r"""The compiled kernel that writes an SOT's task rows straight into a solver's stacked
-buffer (internal to ``sotpy.tasks``: the row programs of :mod:`.rows`).
+r"""The compiled kernels that write task rows straight into a solver's buffers: an
+SOT's stack (the row programs of :mod:`.rows`) and a whole-body controller's problem
+(:mod:`sotpy.solvers.wbc.program`). Internal; one module because both use the
+rotation and pose logarithms below, and numba's cache does not notice a change in
+another file's kernel that a cached kernel calls.
 
 :func:`write_rows` runs a whole program in one call: for each feature the Jacobian
 rows and the error, for each task its targets or bounds, the SOT's joint-limit level
@@ -21,6 +24,9 @@ here so that they compile with the rest (Pinocchio's are Python calls):
   ``c = 1/theta^2 - 1/(2 theta tan(theta/2))``, and ``c = 1/12 + theta^2/720 +
   theta^4/30240`` below ``theta = 1e-2``: ``d log3(R exp([d])) / dd`` at ``d = 0``
   (the inverse of the right Jacobian of SO(3)).
+* ``log6(M) = (V(w)^-1 p, w)`` for ``M = (R, p)``, ``w = log3(R)``, with ``V^-1 = I -
+  [w]/2 + c(theta) [w]^2 = Jlog3(R)^T`` (the same ``c``), as Pinocchio's ``log6``
+  (linear part first): the contact feedback's pose error.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ import math
 
 import numpy as np
 
-from .._jit import kernel
+from .._jit import any_layout, kernel
 
 _PI_SIDE = -0.9  # cos(theta) below this: the axis from the symmetric part
 
@@ -84,6 +90,33 @@ def _jlog3(w, theta, J):  # pragma: no cover - compiled
     J[2, 0] = -0.5 * y + c * x * z
     J[1, 2] = -0.5 * x + c * y * z
     J[2, 1] = 0.5 * x + c * y * z
+
+
+def _relative(H, Hd, Rr, p):  # pragma: no cover - compiled
+    """``(Rr, p[:3]) <- M*^-1 M = (R*^T R, R*^T (p - p*))`` of the homogeneous matrices
+    ``H`` of ``M = (R, p)`` and ``Hd`` of ``M* = (R*, p*)``."""
+    for i in range(3):
+        for j in range(3):
+            Rr[i, j] = Hd[0, i] * H[0, j] + Hd[1, i] * H[1, j] + Hd[2, i] * H[2, j]
+    for i in range(3):
+        p[i] = (
+            Hd[0, i] * (H[0, 3] - Hd[0, 3])
+            + Hd[1, i] * (H[1, 3] - Hd[1, 3])
+            + Hd[2, i] * (H[2, 3] - Hd[2, 3])
+        )
+
+
+def _log6(H, Hd, out, Rr, Jl):  # pragma: no cover - compiled (the twin: Pinocchio's log6)
+    """``out <- log6(M*^-1 M)`` (linear then angular) of the homogeneous matrices ``H``
+    and ``Hd``: with ``(Rr, pr) = M*^-1 M`` and ``w = log3(Rr)``, the linear part is
+    ``V(w)^-1 pr = Jlog3(Rr)^T pr`` (``V^-1 = I - [w]/2 + c [w]^2``, the transpose of
+    ``Jlog3``, see the module doc)."""
+    _relative_c(H, Hd, Rr, out)
+    theta = _log3_c(Rr, out[3:])
+    _jlog3_c(out[3:], theta, Jl)
+    p0, p1, p2 = out[0], out[1], out[2]
+    for i in range(3):
+        out[i] = Jl[0, i] * p0 + Jl[1, i] * p1 + Jl[2, i] * p2
 
 
 #: Operation kinds of a row program (``code[op, 0]``; see :mod:`.rows` and
@@ -188,16 +221,7 @@ def _write_rows(  # pragma: no cover - compiled
                     return REFUSED
                 if sel[i] >= 3:
                     rot = True
-            # R = H[:3, :3], p = H[:3, 3] (and R*, p* from H*)
-            for i in range(3):
-                for j in range(3):
-                    Rr[i, j] = Hd[0, i] * H[0, j] + Hd[1, i] * H[1, j] + Hd[2, i] * H[2, j]
-            for i in range(3):
-                e[i] = (
-                    Hd[0, i] * (H[0, 3] - Hd[0, 3])
-                    + Hd[1, i] * (H[1, 3] - Hd[1, 3])
-                    + Hd[2, i] * (H[2, 3] - Hd[2, 3])
-                )
+            _relative_c(H, Hd, Rr, e)
             if rot:
                 theta = _log3_c(Rr, e[3:])
                 _jlog3_c(e[3:], theta, Jl)
@@ -359,9 +383,143 @@ def _write_rows(  # pragma: no cover - compiled
     return r
 
 
+#: The operations of :func:`_write_problem`, the whole-body controller's writer
+#: (``code[op, 0]``; see :mod:`sotpy.solvers.wbc.program`).
+WBC_DYNAMICS, WBC_CONTACT, WBC_TASK, WBC_COST = 0, 1, 2, 3
+#: Its ``code`` rows: kind, row, column, rows, then positions of arrays and scalars.
+WBC_FIELDS = 10
+#: The matrices and vectors one of its calls takes (a longer program: several calls).
+WBC_MATS, WBC_VECS = 9, 12
+
+
+def _write_problem(  # pragma: no cover - compiled
+    data, offs, nv, n, m, mc, code, scal, M, b,
+    m0, m1, m2, m3, m4, m5, m6, m7, m8,
+    v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11,
+):  # fmt: skip
+    """Write the entries of a whole-body problem that change with the state, into the
+    packed array ``data``: ``A`` (nv x n), ``c``, ``E`` (m x n), ``f``, ``w``, ``C`` (mc
+    x n), ``lo``, ``hi`` at the offsets ``offs`` (in that order). Each row of ``code``
+    is an operation, its fields ``kind, row, col, k, J, H, Hd, u, x, s``: ``J, H, Hd``
+    positions in ``mats = (m0, ...)``, ``u, x`` in ``vecs = (v0, ...)``, ``s`` in
+    ``scal``; -1 for an absent one. Every row of ``J`` has ``nv`` entries (the columns
+    of ``a``); the other entries of the rows written are constant (the Python writers
+    wrote them when the buffers were made).
+
+    * ``WBC_DYNAMICS``: ``A[:, :nv] = M`` (``M``'s upper triangle, mirrored: Pinocchio's
+      CRBA fills only that one) and ``c = -b``.
+    * ``WBC_CONTACT (row, col, k, J, H, Hd, u = drift, x = qdot, s)``: ``A[:, col:col+k]
+      = -J^T`` (the contact's wrench columns of the equations of motion; the first
+      ``k`` rows of ``J``); with ``row >= 0`` also the contact rows ``C[row:row+k, :nv]
+      = J`` and ``lo = hi = -drift - kp e - kd J qdot`` (the first ``k`` entries). The
+      feedback, with ``H >= 0``: ``e = log6(M*^-1 M)`` of the frame's placement ``M``
+      (homogeneous ``H``) and its reference ``M*`` (``Hd``), ``J qdot`` the frame's
+      twist, ``kp = scal[s]``, ``kd = scal[s + 1]``.
+    * ``WBC_TASK (row, k, J, u = drift, x = desired, s = w)``: ``E[row:row+k, :nv] = J``
+      (with ``J``), ``f = desired - drift`` (``drift`` optional) and the row weights
+      ``w = vecs[s]``.
+    * ``WBC_COST (row, k, col, x = f, s)``: the contact wrench cost's weights of one
+      contact, ``w[row:row+k] = scal[s] / F^2`` with ``F = max(f[col], scal[s + 1])``
+      (``f`` the wrenches of the last solution, ``col`` the contact's normal force), or
+      ``max(scal[s + 2], scal[s + 1])`` when ``f`` is empty.
+
+    Returns 0, or :data:`REFUSED` (an array of an unexpected shape, a row outside the
+    buffers: nothing is to be used; the caller writes the tick in Python).
+    """
+    mats = (m0, m1, m2, m3, m4, m5, m6, m7, m8)
+    vecs = (v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11)
+    A = data[offs[0] : offs[0] + nv * n].reshape((nv, n))
+    c = data[offs[1] : offs[1] + nv]
+    E = data[offs[2] : offs[2] + m * n].reshape((m, n))
+    f = data[offs[3] : offs[3] + m]
+    w = data[offs[4] : offs[4] + m]
+    C = data[offs[5] : offs[5] + mc * n].reshape((mc, n))
+    lo = data[offs[6] : offs[6] + mc]
+    hi = data[offs[7] : offs[7] + mc]
+    e = np.empty(6)
+    Rr = np.empty((3, 3))
+    Jl = np.empty((3, 3))
+    for op in range(code.shape[0]):
+        kind, row, col, k = code[op, 0], code[op, 1], code[op, 2], code[op, 3]
+        jm, ih, ihd, u, x, s = (
+            code[op, 4], code[op, 5], code[op, 6], code[op, 7], code[op, 8], code[op, 9]
+        )  # fmt: skip
+        if kind == WBC_DYNAMICS:
+            if M.shape[0] != nv or M.shape[1] != nv or b.shape[0] != nv:
+                return REFUSED
+            for i in range(nv):
+                for j in range(nv):
+                    A[i, j] = M[i, j] if i <= j else M[j, i]
+                c[i] = -b[i]
+            continue
+        J = mats[jm]
+        if kind == WBC_CONTACT:
+            if jm < 0 or J.shape[0] < k or J.shape[1] != nv or col < nv or col + k > n:
+                return REFUSED
+            for i in range(nv):
+                for j in range(k):
+                    A[i, col + j] = -J[j, i]
+            if row < 0:
+                continue
+            if u < 0 or vecs[u].shape[0] < k or row + k > mc or k > 6:
+                return REFUSED
+            feedback = ih >= 0
+            if feedback:
+                H, Hd, qdot = mats[ih], mats[ihd], vecs[x]
+                if H.shape[0] != 4 or H.shape[1] != 4 or Hd.shape[0] != 4 or Hd.shape[1] != 4:
+                    return REFUSED
+                if qdot.shape[0] != nv:
+                    return REFUSED
+                _log6_c(H, Hd, e, Rr, Jl)
+            drift = vecs[u]
+            for i in range(k):
+                Ci = C[row + i]
+                Ji = J[i]
+                nu = 0.0
+                for j in range(nv):
+                    Ci[j] = Ji[j]
+                rhs = -drift[i]
+                if feedback:
+                    for j in range(nv):
+                        nu += Ji[j] * vecs[x][j]
+                    rhs -= scal[s] * e[i] + scal[s + 1] * nu
+                lo[row + i] = rhs
+                hi[row + i] = rhs
+        elif kind == WBC_TASK:
+            d, wk = vecs[x], vecs[s]
+            if jm >= 0 and (J.shape[0] != k or J.shape[1] != nv):
+                return REFUSED
+            if row < 0 or row + k > m or d.shape[0] != k or wk.shape[0] != k:
+                return REFUSED
+            if u >= 0 and vecs[u].shape[0] != k:
+                return REFUSED
+            for i in range(k):
+                if jm >= 0:
+                    Ei = E[row + i]
+                    Ji = J[i]
+                    for j in range(nv):
+                        Ei[j] = Ji[j]
+                f[row + i] = d[i] - vecs[u][i] if u >= 0 else d[i]
+                w[row + i] = wk[i]
+        elif kind == WBC_COST:
+            if row < 0 or row + k > m or col < 0:
+                return REFUSED
+            loads = vecs[x]
+            F = loads[col] if loads.shape[0] > col else scal[s + 2]
+            F = max(F, scal[s + 1])
+            for i in range(k):
+                w[row + i] = scal[s] / (F * F)
+        else:
+            return REFUSED
+    return 0
+
+
 _log3_c = kernel(_log3)
 _jlog3_c = kernel(_jlog3)
+_relative_c = kernel(_relative)
+_log6_c = kernel(_log6)
 write_rows = kernel(_write_rows)
+write_problem = kernel(_write_problem)
 _warm: list[bool] = []
 
 
@@ -369,6 +527,15 @@ def log3(R: np.ndarray) -> np.ndarray:
     """The compiled ``log3`` (tests compare it with Pinocchio's; needs numba)."""
     out = np.empty(3)
     _log3_c(np.ascontiguousarray(R, dtype=float), out)  # type: ignore[misc]
+    return out
+
+
+def log6(H: np.ndarray, Hd: np.ndarray) -> np.ndarray:
+    """The compiled ``log6(M*^-1 M)`` of two homogeneous matrices (tests compare it with
+    Pinocchio's)."""
+    out = np.empty(6)
+    _log6_c(np.ascontiguousarray(H, dtype=float), np.ascontiguousarray(Hd, dtype=float),
+            out, np.empty((3, 3)), np.empty((3, 3)))  # type: ignore[misc]  # fmt: skip
     return out
 
 
@@ -380,26 +547,17 @@ def jlog3(R: np.ndarray) -> np.ndarray:
     return J
 
 
-def _padding(ndim: int, dtype: type) -> np.ndarray:
-    """A read-only array of layout ``A`` (a strided view): the type every matrix,
-    vector or index argument of :func:`write_rows` is compiled for. numba converts any
-    float64 (int64) array of that dimension to it, C or Fortran, writable or not, so
-    that one compiled version serves them all."""
-    a = np.zeros((3, 4) if ndim == 2 else 4, dtype=dtype)[..., ::2]
-    a.setflags(write=False)
-    return a
-
-
 #: The arguments a call of ``write_rows`` pads its unused positions with.
 PAD = (
-    (_padding(2, np.float64),) * MATS + (_padding(1, np.float64),) * VECS
-    + (_padding(1, np.int64),) * INTS
+    (any_layout(2),) * MATS + (any_layout(1),) * VECS + (any_layout(1, np.int64),) * INTS
 )  # fmt: skip
+#: The same for ``write_problem``.
+WBC_PAD = (any_layout(2),) * WBC_MATS + (any_layout(1),) * WBC_VECS
 
 
 def warm_up() -> None:
     """Compile (or load from the cache) ``write_rows`` for the argument types it is
-    given (see :func:`_padding`; the rows go to C-ordered arrays, the solver's stacked
+    given (see :func:`sotpy._jit.any_layout`; the rows go to C-ordered arrays, the solver's stacked
     buffers and the SOT's own), then forbid further compilation: an unforeseen type (an
     integer Jacobian) raises ``TypeError`` at the call and the caller goes back to the
     signals, instead of compiling mid-loop."""
@@ -410,8 +568,13 @@ def warm_up() -> None:
     code = np.full((1, FIELDS), -1, dtype=np.int64)
     code[0, 0] = LIMITS
     write_rows(code[:0], b, np.zeros(3, np.int64), A, b, b, np.zeros(1, np.int64), False, *PAD)
+    wcode = np.full((1, WBC_FIELDS), -1, dtype=np.int64)
+    wcode[0, 0] = WBC_DYNAMICS
+    write_problem(np.zeros(12), np.zeros(8, np.int64), 2, 3, 0, 0, wcode[:0], np.zeros(1),
+                  any_layout(2), any_layout(1), *WBC_PAD)  # fmt: skip
     log3(np.eye(3))
     jlog3(np.eye(3))
-    for k in (write_rows, _log3_c, _jlog3_c):
+    log6(np.eye(4), np.eye(4))
+    for k in (write_rows, write_problem, _log3_c, _jlog3_c, _log6_c):
         k.disable_compile()
     _warm.append(True)

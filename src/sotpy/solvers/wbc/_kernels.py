@@ -132,16 +132,8 @@ def _put_row(out, row, b, hmax, sr, bs, p, n):  # pragma: no cover - compiled
     bs[p] = scale * b
 
 
-def _solve(
-    data, ws, act, up, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
-):  # pragma: no cover - compiled
-    """``(status, ok)``: the reduced QP of :meth:`.qp.WeightedQP.reduce` written to the
-    workspace and, if ``guess``, the guessed active set's solution ``y`` (``ok``:
-    accepted). ``status``: 0, or 1 (a NaN bound), 2 (a row with lower > upper +
-    1e-12). The actuated rows of ``A`` are its last ``na`` rows."""
-    ny = n - na
-    nu = nv - na
-    kmax = nu + mc
+def _data_views(data, nv, n, m, mc):  # pragma: no cover - compiled
+    """The views ``(A, c, E, f, w, C, lo, hi)`` of the packed input (:func:`data_layout`)."""
     o = 0
     A = data[o : o + nv * n].reshape((nv, n))
     o += nv * n
@@ -158,6 +150,24 @@ def _solve(
     lo = data[o : o + mc]
     o += mc
     hi = data[o : o + mc]
+    return A, c, E, f, w, C, lo, hi
+
+
+def _solve(
+    data, ws, act, up, unit, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
+):  # pragma: no cover - compiled
+    """``(status, ok)``: the reduced QP of :meth:`.qp.WeightedQP.reduce` written to the
+    workspace and, if ``guess``, the guessed active set's solution ``y`` (``ok``:
+    accepted). ``status``: 0, or 1 (a NaN bound), 2 (a row with lower > upper +
+    1e-12). The actuated rows of ``A`` are its last ``na`` rows. ``unit`` (size ``m +
+    mc``, the task rows then the constraint rows; or empty): the column of a row whose
+    only nonzero entry is a 1 (a posture, a torque or joint limit), -1 for the others;
+    such a row costs one update of ``H`` (or a copy of ``T_tau``'s row) instead of a
+    pass over ``n`` columns."""
+    ny = n - na
+    nu = nv - na
+    kmax = nu + mc
+    A, c, E, f, w, C, lo, hi = _data_views(data, nv, n, m, mc)
     o = 0
     H = ws[o : o + ny * ny].reshape((ny, ny))
     o += ny * ny
@@ -220,11 +230,18 @@ def _solve(
     for i in range(ny):  # eps I: the regularisation of y = (a, f)
         H[i, i] = reg
     # the task rows
+    general = unit.shape[0] != m + mc  # no unit rows known
     for i in range(m):
         wi = w[i]
         if wi == 0.0:
             continue
         fyi = f[i]
+        col = -1 if general else unit[i]
+        if col >= 0 and (col < nv or col >= nv + na):  # one entry 1 on a or f
+            yc = col if col < nv else col - na
+            H[yc, yc] += wi
+            g[yc] -= wi * fyi
+            continue
         for j in range(nv):
             ey[j] = E[i, j]
         for j in range(nv, ny):
@@ -254,17 +271,29 @@ def _solve(
     status = 0
     neq = 0
     for i in range(mc):
-        for j in range(nv):
-            Cy[i, j] = C[i, j]
-        for j in range(nv, ny):
-            Cy[i, j] = C[i, j + na]
+        col = -1 if general else unit[m + i]
         s = 0.0
-        for j in range(na):
-            e = C[i, nv + j]
-            if e != 0.0:
-                for col in range(ny):
-                    Cy[i, col] += e * Tt[j, col]
-                s += e * tt[j]
+        if col >= 0:  # one entry 1: a row of the identity over y, or of T_tau
+            if nv <= col < nv + na:
+                j = col - nv
+                for q in range(ny):
+                    Cy[i, q] = Tt[j, q]
+                s = tt[j]
+            else:
+                for q in range(ny):
+                    Cy[i, q] = 0.0
+                Cy[i, col if col < nv else col - na] = 1.0
+        else:
+            for j in range(nv):
+                Cy[i, j] = C[i, j]
+            for j in range(nv, ny):
+                Cy[i, j] = C[i, j + na]
+            for j in range(na):
+                e = C[i, nv + j]
+                if e != 0.0:
+                    for q in range(ny):
+                        Cy[i, q] += e * Tt[j, q]
+                    s += e * tt[j]
         loy[i] = lo[i] - s
         hiy[i] = hi[i] - s
         if np.isnan(loy[i]) or np.isnan(hiy[i]):
@@ -421,6 +450,7 @@ def _solve(
     return status, True
 
 
+_data_views = kernel(_data_views)
 _cholesky = kernel(_cholesky, fast=True)
 _forward = kernel(_forward, fast=True)
 _put_row = kernel(_put_row, fast=True)
@@ -443,8 +473,8 @@ def warm_up() -> None:
     ws = np.zeros(work_layout(nv, na, n, m, mc)["size"][0])
     A = data[: nv * n].reshape(nv, n)
     A[:, :nv] = np.eye(nv)
-    solve(data, ws, np.zeros(1, dtype=np.intp), np.ones(1, dtype=np.bool_), nv, na, n, m, mc,
-          1e-8, True, 1e-9, 1e-9, 1e6)  # fmt: skip
+    solve(data, ws, np.zeros(1, dtype=np.intp), np.ones(1, dtype=np.bool_),
+          np.zeros(0, dtype=np.intp), nv, na, n, m, mc, 1e-8, True, 1e-9, 1e-9, 1e6)  # fmt: skip
     solve.disable_compile()
     _warm.append(True)
     report_compile("the whole-body QP kernel", time.perf_counter() - start)

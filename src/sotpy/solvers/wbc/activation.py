@@ -121,7 +121,13 @@ class Activatable:
 
     def begin(self, t: float, dt: float) -> bool:
         """Advance the ramp by ``dt`` and call ``onComputeBegin``; False if inactive."""
-        if self.state == "inactive":
+        state = self.state
+        if state == "active":  # the usual case, first
+            fn = self.callbacks["onComputeBegin"]
+            if fn is not None:
+                fn(t, dt)
+            return True
+        if state == "inactive":
             return False
         self._call("onComputeBegin", t, dt)
         step = 1.0 if self.ramp_duration <= 0.0 else dt / self.ramp_duration
@@ -136,9 +142,14 @@ class Activatable:
 
     def end(self, t: float, dt: float) -> None:
         """Call ``onComputeEnd`` and finish a ramp that reached its end."""
-        if self.state == "inactive":
+        state = self.state
+        if state == "inactive":
             return
-        self._call("onComputeEnd", t, dt)
+        fn = self.callbacks["onComputeEnd"]
+        if fn is not None:
+            fn(t, dt)
+        if state == "active":
+            return
         if self.state == "activating" and self.ramp >= 1.0:
             self.state = "active"
             self._call("onActivated")

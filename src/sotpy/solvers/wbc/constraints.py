@@ -112,6 +112,10 @@ class Constraint(Activatable):
         self.write(robot, layout, C, lo, hi, True)
         return C, lo, hi
 
+    #: Whether every row :meth:`write` writes is constant with one nonzero entry, a 1
+    #: (the joint limits: their bounds change, not their rows); see ``.tasks.Task``.
+    unit_rows = False
+
     def count(self, robot: RobotModel, layout: Layout) -> int:
         """The number of rows (a change rebuilds the problem's buffers)."""
         raise NotImplementedError
@@ -156,6 +160,8 @@ def _clip(x: np.ndarray) -> np.ndarray:
 class JointTorqueLimit(Constraint):
     """``tau_min <= tau <= tau_max`` (default: the model's effort limits)."""
 
+    unit_rows = True
+
     def __init__(
         self, name: str, robot: RobotModel, lower: object = None, upper: object = None
     ) -> None:
@@ -169,6 +175,7 @@ class JointTorqueLimit(Constraint):
             robot.na,
         )
         self._kept: tuple | None = None
+        self._written: tuple | None = None  # the bounds last written (write)
 
     def _bounds_kept(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(kept joints, their lower and upper bounds): recomputed when the bounds change
@@ -176,22 +183,28 @@ class JointTorqueLimit(Constraint):
         key = (self.lower.tobytes(), self.upper.tobytes())
         if self._kept is None or self._kept[0] != key:
             keep = np.flatnonzero(_keep(self.lower, self.upper))
-            self._kept = (key, keep, _clip(self.lower[keep]), _clip(self.upper[keep]))
-        return self._kept[1:]
+            self._kept = (key, (keep, _clip(self.lower[keep]), _clip(self.upper[keep])))
+        return self._kept[1]
 
     def count(self, robot: RobotModel, layout: Layout) -> int:
         return len(self._bounds_kept()[0])
 
     def write(self, robot, layout, C, lo, hi, first) -> None:
-        keep, lower, upper = self._bounds_kept()
+        kept = self._bounds_kept()
+        if not first and kept is self._written:
+            return  # the same bounds as at the previous tick, still in the buffer
+        keep, lower, upper = kept
         if first:
             C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
         lo[:] = lower
         hi[:] = upper
+        self._written = kept
 
 
 class JointAccelerationLimit(Constraint):
     """``a_min <= S a <= a_max`` (rad/s^2)."""
+
+    unit_rows = True
 
     def __init__(self, name: str, robot: RobotModel, lower: object, upper: object) -> None:
         super().__init__(name)
@@ -217,6 +230,8 @@ def _horizon(name: str, h: float) -> float:
 
 class JointVelocityLimit(Constraint):
     """``v_min <= v + h a <= v_max`` over the actuated joints (default: model limits)."""
+
+    unit_rows = True
 
     def __init__(
         self,
@@ -257,6 +272,8 @@ class JointPositionLimit(Constraint):
     m, >= 0, less than half a joint's range) keeps ``q`` that far inside the model's
     limits (the real robot, or another simulator, does not integrate exactly as the
     prediction)."""
+
+    unit_rows = True
 
     def __init__(self, name: str, robot: RobotModel, horizon: float, margin: float = 0.0) -> None:
         super().__init__(name)
@@ -321,27 +338,55 @@ class ContactState(Activatable):
         #: the placement the contact feedback holds (``ContactSpec.kp``): the frame's
         #: placement at the first tick after the contact was created or activated
         self.reference: pin.SE3 | None = None
+        self._reference_h: tuple | None = None  # (reference, its homogeneous matrix)
 
     def activate(self) -> None:
         if self.state in ("inactive", "deactivating"):
             self.reference = None  # the contact holds where it lands
         super().activate()
 
-    def feedback(self, robot: RobotModel) -> np.ndarray | None:
-        """``-kp e - kd nu`` (LOCAL, the contact's dim) of a unilateral contact with
-        feedback gains, or None; sets the reference at its first call."""
+    @property
+    def has_feedback(self) -> bool:
+        """Whether the contact has pose or velocity feedback (unilateral, a gain > 0)."""
         c = self.spec
-        if c.bilateral or (c.kp == 0.0 and c.kd in (None, 0.0)):
-            return None
-        fid = robot.frame_id(c.frame)
+        return not c.bilateral and not (c.kp == 0.0 and c.kd in (None, 0.0))
+
+    def feedback_terms(self, robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+        """``(e, nu)`` of a contact with feedback (:attr:`has_feedback`): the pose error
+        ``log6(M_ref^-1 M)`` and the frame's LOCAL twist (6 each); sets the reference
+        at its first call."""
+        fid = robot.frame_id(self.spec.frame)
         data = robot.data
-        M = data.oMf[fid]
+        e = self.pose_error(data.oMf[fid])
+        return e, pin.getFrameVelocity(robot.model, data, fid, _LOCAL).vector
+
+    def pose_error(self, M: pin.SE3) -> np.ndarray:
+        """``log6(M_ref^-1 M)`` (6: LOCAL, linear then angular) of the frame's placement
+        ``M``; ``M`` becomes the reference if there is none yet."""
         if self.reference is None:
             self.reference = pin.SE3(M)
-        kp, kd = c.gains
-        err = pin.log6(self.reference.actInv(M)) * kp  # Motion arithmetic, in C++
-        err += pin.getFrameVelocity(robot.model, data, fid, _LOCAL) * kd
-        return -(err.vector[: c.dim])
+        return pin.log6(self.reference.actInv(M)).vector
+
+    def reference_homogeneous(self, M: pin.SE3) -> np.ndarray:
+        """The reference's homogeneous matrix (kept while the reference is the same
+        object); ``M`` becomes the reference if there is none yet."""
+        ref = self.reference
+        if ref is None:
+            ref = self.reference = pin.SE3(M)
+        cached = self._reference_h
+        if cached is None or cached[0] is not ref:
+            cached = self._reference_h = (ref, ref.homogeneous.copy())
+        return cached[1]
+
+    def feedback(self, robot: RobotModel) -> np.ndarray | None:
+        """``-kp e - kd nu`` (LOCAL, the contact's dim; :meth:`feedback_terms`) of a
+        contact with feedback, or None."""
+        if not self.has_feedback:
+            return None
+        e, nu = self.feedback_terms(robot)
+        kp, kd = self.spec.gains
+        d = self.spec.dim
+        return -(kp * e[:d] + kd * nu[:d])
 
 
 class ContactConstraint(Constraint):
@@ -400,7 +445,10 @@ class ContactConstraint(Constraint):
     def count(self, robot: RobotModel, layout: Layout) -> int:
         return sum(c.dim + nf + ramp for c, _s, nf, ramp, _sl, _st in self._planned(layout))
 
-    def write(self, robot, layout, C, lo, hi, first) -> None:
+    def write(self, robot, layout, C, lo, hi, first, contact_rows: bool = True) -> None:
+        """:meth:`Constraint.write`; ``contact_rows=False``: all but the rows ``J_c a =
+        -Jdot_c v + feedback`` of the contacts that are not inactive (the controller's
+        compiled writer wrote them, :mod:`.program`)."""
         r = 0
         a = layout.a
         for c, state, nf, ramp, sl, st in self._planned(layout):
@@ -408,17 +456,18 @@ class ContactConstraint(Constraint):
             if state == "inactive":  # f_c = 0
                 if first:
                     C[np.arange(r, r + d), np.arange(sl.start, sl.stop)] = 1.0
-                lo[r : r + d] = 0.0
-                hi[r : r + d] = 0.0
+                    lo[r : r + d] = 0.0
+                    hi[r : r + d] = 0.0
                 r += d
                 continue
-            C[r : r + d, a] = robot.contact_jacobian(c)
-            rhs = -robot.contact_drift(c)
-            fb = None if st is None else st.feedback(robot)
-            if fb is not None:
-                rhs += fb
-            lo[r : r + d] = rhs
-            hi[r : r + d] = rhs
+            if contact_rows:
+                C[r : r + d, a] = robot.contact_jacobian(c)
+                rhs = -robot.contact_drift(c)
+                fb = None if st is None else st.feedback(robot)
+                if fb is not None:
+                    rhs += fb
+                lo[r : r + d] = rhs
+                hi[r : r + d] = rhs
             r += d
             if nf:
                 if first:  # constant rows and bounds

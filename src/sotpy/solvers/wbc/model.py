@@ -45,6 +45,7 @@ from ...errors import SotpyError
 __all__ = ["BilateralContactSpec", "ContactSpec", "Layout", "RobotModel"]
 
 LWA = pin.LOCAL_WORLD_ALIGNED
+_sum = np.add.reduce
 _ACCELERATION = pin.KinematicLevel.ACCELERATION
 
 
@@ -226,7 +227,7 @@ class RobotModel:
                 f"RobotModel.update: expected q of size {self.nq} and v of size {self.nv},"
                 f" got {q.shape} and {v.shape}"
             )
-        if not math.isfinite(q.sum() + v.sum()) and not (
+        if not math.isfinite(_sum(q) + _sum(v)) and not (
             np.isfinite(q).all() and np.isfinite(v).all()  # the sum overflowed, or not
         ):
             raise SotpyError("RobotModel.update: q or v is not finite")

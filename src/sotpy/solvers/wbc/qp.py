@@ -65,6 +65,7 @@ _DAQP_FLAGS = {
     -6: "overdetermined initial active set",
 }
 _dgesv = _lapack.dgesv
+_NO_UNIT = np.zeros(0, dtype=np.intp)
 _STATUS = {
     1: "NaN in the constraint bounds",
     2: "a constraint has lower > upper (infeasible bounds)",
@@ -107,6 +108,7 @@ class WeightedQP:
         self._ws: tuple | None = None  # (sizes, workspace, views) of the compiled kernel
         self._active = np.zeros(0, dtype=np.intp)  # indices into the constraint rows
         self._upper = np.zeros(0, dtype=bool)  # at the upper bound (else the lower)
+        self._unit = _NO_UNIT  # the rows of the identity (see solve_rows)
 
     def forget(self) -> None:
         """Drop the active-set guess (the next solve calls DAQP)."""
@@ -176,15 +178,20 @@ class WeightedQP:
         regularisation: float,
         packed=None,
         keep: int = 0,
+        unit: np.ndarray | None = None,
     ) -> tuple[np.ndarray | None, str]:
         """:meth:`solve` with the task rows stacked (``E`` m x n, ``f``, ``w`` = diag W).
         ``packed``: the flat array the arrays are views of, laid out by
         ``_kernels.data_layout`` (the controller's buffers are); otherwise they
         are copied into one for the compiled kernel. ``keep``: the constraint rows of
         the previous solve kept at the same places when the number of rows changed
-        (rows appended or removed at the end): its active set is still a guess there."""
+        (rows appended or removed at the end): its active set is still a guess there.
+        ``unit``: for the compiled kernel, the column of each task then constraint row
+        whose only nonzero entry is a 1, -1 for the others (``_kernels.solve``; the
+        controller's :meth:`~.solver.WholeBodyController.problem` knows them)."""
         nv, na, n = layout.nv, layout.na, layout.n
         m, mc = E.shape[0], C.shape[0]
+        self._unit = unit if unit is not None and len(unit) == m + mc else _NO_UNIT
         key = (n, mc, nv - na)
         self.last_residual: float | None = None
         if key != self._key and self._key is not None and keep and self._key[0::2] == key[0::2]:
@@ -247,7 +254,7 @@ class WeightedQP:
 
     def _kernel(self, packed, ws, nv, na, n, m, mc, reg, guess) -> tuple[int, bool]:
         return _kernels.solve(
-            packed, ws, self._active, self._upper, nv, na, n, m, mc, reg, guess,
+            packed, ws, self._active, self._upper, self._unit, nv, na, n, m, mc, reg, guess,
             PRIMAL_TOL, DUAL_TOL, _LAMBDA_MAX,
         )  # fmt: skip
 

@@ -80,7 +80,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ... import _jit
 from ...errors import SotpyError, SotpyWarning
+from ...tasks import _rowkernels
 from ..hierarchy import NUMPY_BUDGET_FACTOR, HierarchySolver
 from ._kernels import data_layout
 from .constraints import (
@@ -90,6 +92,7 @@ from .constraints import (
     JointTorqueLimit,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
+from .program import ProblemProgram, owns, unit_columns
 from .qp import WeightedQP, _as_index, _to_y_into, packed_views
 from .tasks import ContactWrenchCost, Task
 
@@ -164,6 +167,12 @@ class WholeBodyController:
         self.setRegularisation(regularisation)
         #: the hierarchical strategy's last HierarchyResult (None before its first tick)
         self.last_hierarchy = None
+        # the QP kernel and the problem's writer (loaded from the cache; on a machine's
+        # first use compiled in the background for the next runs, said on stderr first)
+        _jit.prepare(
+            "the whole-body controller's kernels",
+            ["sotpy.solvers.wbc._kernels", "sotpy.tasks._rowkernels"],
+        )
         self.weighted_qp = WeightedQP(self.robot.actuated, self._unactuated)
         self.contact_cost = ContactWrenchCost()
         eff = np.asarray(self.robot.model.effortLimit, dtype=float)[self.robot.actuated]
@@ -393,12 +402,20 @@ class WholeBodyController:
         last = self.last
         if last is not None and last.found and last.f.shape == (self.layout.nf,):
             self.contact_cost.observe(self.layout, last.f)  # the loads of the cost's rows
-        objects = [*self._all(), *self.contact_states.values()]
-        live = [x for x in objects if x.begin(t, dt)]
-        ramping = any(x.state in ("activating", "deactivating") for x in objects)
+        live = []
+        ramping = False  # a ramp under way (begin() is False only when inactive)
+        for objects in (self.tasks, self.constraints, self.contact_states):
+            for x in objects.values():
+                if x.begin(t, dt):
+                    live.append(x)
+                    ramping = ramping or x.state != "active"
+            if objects is self.constraints:
+                contacts = len(live)  # the contacts not inactive: those live after it
+        contacts = len(live) > contacts
         if ramping:  # activated or deactivated directly, not through this controller
             self.transition = True
-        self._check_active(live)
+        if self._warned or not live or (self.robot.free_flyer and not contacts):
+            self._check_active(live, contacts)
         try:
             sol = self.solve(rate=self.transition or ramping)
         finally:
@@ -414,9 +431,9 @@ class WholeBodyController:
             self._warned.add(key)
             warnings.warn(f"WholeBodyController: {message}", SotpyWarning, stacklevel=4)
 
-    def _check_active(self, live: list) -> None:
-        """The warnings of the module doc (once until the condition clears)."""
-        contacts = any(st.state != "inactive" for st in self.contact_states.values())
+    def _check_active(self, live: list, contacts: bool) -> None:
+        """The warnings of the module doc (once until the condition clears); ``contacts``:
+        whether a contact is not inactive."""
         if self.robot.free_flyer and not contacts:
             self._warn(
                 "free",
@@ -474,13 +491,13 @@ class WholeBodyController:
             if some:  # w >= 0: a task whose rows all have weight 0 counts for nothing
                 live.append((task, w))
         cons = [c for c in self.constraints.values() if c.state != "inactive"]
-        counts = tuple(c.count(robot, layout) for c in cons)
+        counts = tuple([c.count(robot, layout) for c in cons])
         cc = self.contact_constraint
         cost = self.contact_cost.contacts(layout, self.contact_states)
         rate_keep = self._rate_keep if bounds is not None else None
         key = (
             layout,
-            tuple((t, t.level) for t, _ in live),
+            tuple([(t, t.level) for t, _ in live]),
             tuple(cons),
             counts,
             cc.structure(layout),
@@ -495,21 +512,29 @@ class WholeBodyController:
             self._keep_rows = asm.mc - (asm.key[-1] or 0)
         if first:
             asm = self._assembly = _Assembly(
-                key, layout, robot, live, cons, counts, cc.count(robot, layout), cost, rate_keep
+                key, layout, robot, live, cons, counts, cc, self.contact_cost, cost, rate_keep
             )
-        A = asm.A
-        robot.write_mass_matrix(asm.A_a)
-        for c in layout.contacts:
-            np.negative(robot.contact_jacobian(c).T, out=A[:, layout.f[c.key]])
-        np.negative(robot.b, out=asm.c)
-        for (task, w), (E, f, wv) in zip(live, asm.task_rows, strict=True):
+        # the entries that change with the state: by the compiled program (not on a
+        # structure's first tick, which writes the constant entries too), else in Python
+        program = asm.program
+        fused = not first and program is not None and program.run(asm.data, live)
+        if not fused:
+            A = asm.A
+            robot.write_mass_matrix(asm.A_a)
+            for c in layout.contacts:
+                np.negative(robot.contact_jacobian(c).T, out=A[:, layout.f[c.key]])
+            np.negative(robot.b, out=asm.c)
+        for i in asm.unfused if fused else range(len(live)):
+            task, w = live[i]
+            E, f, wv = asm.task_rows[i]
             task.write(robot, layout, E, f, first)
             np.copyto(wv, w)
         for con, (C, lo, hi) in zip(cons, asm.con_rows, strict=True):
             con.write(robot, layout, C, lo, hi, first)
-        C, lo, hi = asm.contact_rows
-        cc.write(robot, layout, C, lo, hi, first)
-        if cost:
+        if not fused or asm.contact_ramps:  # (else the program wrote all that changes)
+            C, lo, hi = asm.contact_rows
+            cc.write(robot, layout, C, lo, hi, first, contact_rows=not fused)
+        if cost and not fused:
             E, _f, wv = asm.cost_rows
             self.contact_cost.write(robot, layout, cost, E, wv, first)
         if rate_keep is not None:
@@ -519,7 +544,9 @@ class WholeBodyController:
             lo[:] = bounds[0][rate_keep]
             hi[:] = bounds[1][rate_keep]
         self._rate_rows = 0 if rate_keep is None else len(rate_keep)
-        return (A, asm.c), (asm.C, asm.lo, asm.hi), asm.tasks
+        if first:
+            asm.find_units(live, cons, rate_keep is not None)
+        return (asm.A, asm.c), (asm.C, asm.lo, asm.hi), asm.tasks
 
     def solve(self, rate: bool = False) -> Solution:
         """Solve at the last :meth:`RobotModel.update` (``rate``: with the torque-rate
@@ -605,7 +632,7 @@ class WholeBodyController:
         if asm is not None and asm.tasks is tasks:  # the stacked rows of problem()
             x, reason = qp.solve_rows(
                 self.layout, *dyn, asm.E, asm.f, asm.w, *cons, self.regularisation, asm.data,
-                self._keep_rows,
+                self._keep_rows, asm.unit,
             )  # fmt: skip
         else:
             x, reason = qp.solve(self.layout, dyn, cons, tasks, self.regularisation)
@@ -708,8 +735,9 @@ class _Assembly:
     lo, hi``, all views of one flat array ``data`` (the compiled QP kernel's input,
     :func:`._kernels.data_layout`), and each object's views into them."""
 
-    def __init__(self, key, layout, robot, live, cons, counts, ncontact, cost, rate_keep):
+    def __init__(self, key, layout, robot, live, cons, counts, cc, wrench_cost, cost, rate_keep):
         self.key = key
+        ncontact = cc.count(robot, layout)
         n, nv = layout.n, layout.nv
         sizes = [t.size for t, _ in live]
         ncost = sum(2 if c.dim == 3 else 5 for c in cost)
@@ -723,11 +751,12 @@ class _Assembly:
         self.C, self.lo, self.hi = v["C"], v["lo"], v["hi"]
         self.A[:, layout.tau] = robot.minus_St
         self.A_a = self.A[:, layout.a]
-        self.task_rows, self.tasks = [], []
+        self.task_rows, self.tasks, self._task_starts = [], [], []
         r = 0
         for (task, _w), k in zip(live, sizes, strict=True):
             rows = (self.E[r : r + k], self.f[r : r + k], self.w[r : r + k])
             self.task_rows.append(rows)
+            self._task_starts.append(r)
             self.tasks.append((task.level, *rows))
             r += k
         if ncost:
@@ -760,3 +789,38 @@ class _Assembly:
         )
         r += ncontact
         self.rate_rows = (self.C[r:], self.lo[r:], self.hi[r:])
+        self.live_tasks = [t for t, _w in live]  # the tasks with rows, in order
+        self.unit: np.ndarray | None = None  # the rows of the identity (find_units)
+        # whether a contact has ramp rows (their bounds change at each tick)
+        self.contact_ramps = any(ramp for _c, _s, _nf, ramp, _sl, _st in cc._planned(layout))
+        # the compiled writer of the entries that change with the state (None: the
+        # kernels are not compiled) and the live tasks it does not write (by index)
+        self.program = None
+        self.unfused = list(range(len(live)))
+        if _rowkernels.write_problem is not None:
+            self.program = ProblemProgram(
+                robot, layout, cc._planned(layout), sum(counts),
+                [(t, r0) for (t, _w), r0 in zip(live, self._task_starts, strict=True)],
+                (wrench_cost, cost, sum(sizes)), (nv, n, m, mc),
+            )  # fmt: skip
+            self.unfused = sorted(set(self.unfused) - set(self.program.fused))
+
+    def find_units(self, live: list, cons: list, rate: bool) -> None:
+        """After the first write: :attr:`unit`, for each task row then constraint row,
+        the column of its only nonzero entry when it is a 1 and the row is constant (its
+        object's ``unit_rows``, and the torque-rate rows), else -1 (the QP kernel's
+        ``unit``)."""
+        unit = np.full(self.m + self.mc, -1, dtype=np.intp)
+        for (task, _w), (E, _f, _wv), r in zip(live, self.task_rows, self._task_starts,
+                                                strict=True):  # fmt: skip
+            if owns(task, "unit_rows") and task.unit_rows:
+                unit[r : r + len(E)] = unit_columns(E)
+        r = self.m
+        for con, (C, _lo, _hi) in zip(cons, self.con_rows, strict=True):
+            if owns(con, "unit_rows") and con.unit_rows:
+                unit[r : r + len(C)] = unit_columns(C)
+            r += len(C)
+        if rate:
+            C = self.rate_rows[0]
+            unit[self.m + self.mc - len(C) :] = unit_columns(C)
+        self.unit = unit

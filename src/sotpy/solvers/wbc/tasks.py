@@ -34,10 +34,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 
 from ...errors import SotpyError
 from .activation import Activatable, ramp_weight
 from .model import ContactSpec, Layout, RobotModel
+
+_LWA = pin.LOCAL_WORLD_ALIGNED
 
 __all__ = [
     "CartesianAccelerationTask",
@@ -144,6 +147,21 @@ class Task(Activatable):
     def bind(self, robot: RobotModel, layout: Layout) -> None:
         """Check the task against a model and layout (frames, contacts)."""
 
+    #: Whether every row :meth:`write` writes is constant and has one nonzero entry, a 1
+    #: (a posture, a torque, a wrench): the QP then takes it as such (see
+    #: :func:`.program.owns`: a subclass overriding ``write`` must say it again).
+    unit_rows = False
+
+    def terms(self, robot: RobotModel) -> tuple[np.ndarray | None, np.ndarray | None] | None:
+        """What :meth:`write` writes at each tick but the first, for the controller's
+        compiled problem writer (:mod:`.program`): ``(J, drift)`` with the rows
+        ``E[:, a] = J`` (nv columns; None: the rows are constant, written by
+        :meth:`write` when the buffer is new) and ``f = desired - drift`` (None: ``f =
+        desired``). None (the default): not expressible so; :meth:`write` is then called
+        at every tick. A subclass that overrides :meth:`write` without overriding this
+        is always written by :meth:`write`."""
+        return None
+
 
 class CartesianAccelerationTask(Task):
     """``J a + Jdot v = a_des`` for a frame, LOCAL_WORLD_ALIGNED (see module doc)."""
@@ -160,6 +178,13 @@ class CartesianAccelerationTask(Task):
         E[:, layout.a] = robot.frame_jacobian(self.fid)
         np.subtract(self.desired, robot.frame_drift(self.fid), out=f)
 
+    def terms(self, robot):
+        m, d, fid = robot.model, robot.data, self.fid  # write()'s, without the copies
+        return (
+            pin.getFrameJacobian(m, d, fid, _LWA),
+            pin.getFrameClassicalAcceleration(m, d, fid, _LWA).vector,
+        )
+
 
 class JointAccelerationTask(Task):
     """``S a = a_des`` on the actuated joints (posture)."""
@@ -172,6 +197,11 @@ class JointAccelerationTask(Task):
             E[:, layout.a] = robot.S
         f[:] = self.desired
 
+    def terms(self, robot):
+        return None, None
+
+    unit_rows = True
+
 
 class CoMAccelerationTask(Task):
     """``Jcom a + dJcom v = a_des`` (world axes, m/s^2)."""
@@ -182,6 +212,10 @@ class CoMAccelerationTask(Task):
     def write(self, robot, layout, E, f, first) -> None:
         E[:, layout.a] = robot.Jcom
         np.subtract(self.desired, robot.com_drift, out=f)
+
+    def terms(self, robot):
+        d = robot.data
+        return d.Jcom, d.acom[0]  # robot.Jcom and robot.com_drift
 
 
 class WrenchTask(Task):
@@ -209,6 +243,11 @@ class WrenchTask(Task):
             E[np.arange(self.size), np.arange(sl.start, sl.stop)] = 1.0
         f[:] = self.desired
 
+    def terms(self, robot):
+        return None, None
+
+    unit_rows = True
+
 
 class TorqueTask(Task):
     """``tau = tau_des`` (actuated joints, N m)."""
@@ -221,6 +260,11 @@ class TorqueTask(Task):
             E[np.arange(layout.na), np.arange(layout.tau.start, layout.tau.stop)] = 1.0
         f[:] = self.desired
 
+    def terms(self, robot):
+        return None, None
+
+    unit_rows = True
+
 
 class RegularisationTask(Task):
     """``chi = 0``: the global regularisation (size n, weight 1e-5 by default)."""
@@ -232,6 +276,11 @@ class RegularisationTask(Task):
         if first:
             E[:] = np.eye(layout.n)
         f[:] = self.desired
+
+    def terms(self, robot):
+        return None, None
+
+    unit_rows = True
 
 
 def _finite(x: float) -> bool:
@@ -267,7 +316,36 @@ class ContactWrenchCost:
 
     def __init__(self, weight: float = 0.1) -> None:
         self.setWeight(weight)
-        self.loads: dict[str, float] = {}  # contact key -> F (N), from the last solution
+        self._observed: tuple[Layout, np.ndarray] | None = None  # (layout, wrenches)
+        self._loads: dict[str, float] | None = None
+
+    @property
+    def loads(self) -> dict[str, float]:
+        """Contact key -> ``F`` (N): the normal forces of the last solution observed
+        (:meth:`observe`; empty before one)."""
+        if self._loads is None:
+            loads = {}
+            if self._observed is not None:
+                layout, f = self._observed
+                i = 0
+                for c in layout.contacts:
+                    if not c.bilateral:
+                        loads[c.key] = float(f[i + 2])
+                    i += c.dim
+            self._loads = loads
+        return self._loads
+
+    @loads.setter
+    def loads(self, loads: dict[str, float]) -> None:
+        """Set the loads by contact key (until the next :meth:`observe`)."""
+        self._observed = None
+        self._loads = {str(k): float(v) for k, v in loads.items()}
+
+    def observed(self, layout: Layout) -> np.ndarray | None:
+        """The wrenches of the last solution observed (layout order), if it was over
+        ``layout`` (the controller's compiled writer reads the loads there)."""
+        obs = self._observed
+        return obs[1] if obs is not None and obs[0] is layout else None
 
     def setWeight(self, weight: float) -> None:
         w = float(weight)
@@ -298,14 +376,9 @@ class ContactWrenchCost:
 
     def observe(self, layout: Layout, f: np.ndarray) -> None:
         """Record the normal forces of a solution's wrenches ``f`` (every contact's,
-        layout order) as the next tick's loads."""
-        i = 0
-        loads = {}
-        for c in layout.contacts:
-            if not c.bilateral:
-                loads[c.key] = float(f[i + 2])
-            i += c.dim
-        self.loads = loads
+        layout order) as the next tick's loads (a copy: the solution is the caller's)."""
+        self._observed = (layout, np.array(f, dtype=float))
+        self._loads = None
 
     def contacts(self, layout: Layout, states: dict) -> list[ContactSpec]:
         """The contacts the cost has rows for (unilateral, not inactive; none if the
