@@ -24,7 +24,8 @@ from sotpy.solvers.wbc import (
     WrenchTask,
     _kernels,
 )
-from sotpy.solvers.wbc.program import owns, unit_columns
+from sotpy.solvers.wbc._kernels import CONSTANT, GENERAL, NO_TAU
+from sotpy.solvers.wbc.program import owns, row_kinds, unit_columns
 from sotpy.tasks import _rowkernels as rk
 
 pytestmark = pytest.mark.skipif(
@@ -244,6 +245,45 @@ def test_owns_needs_both_methods_in_the_same_class():
 def test_unit_columns():
     rows = np.array([[0, 1.0, 0], [0, 2.0, 0], [1.0, 1.0, 0], [0, 0, 0], [0, 0, 1.0]])
     assert unit_columns(rows).tolist() == [1, -1, -1, -1, 2]
+
+
+def test_row_kinds():
+    """What the QP kernel may skip in a row: a row of the identity gives its column (if
+    asked), a row without torque entries the kind given, any other GENERAL."""
+    tau = slice(2, 4)
+    rows = np.array([[1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0], [0.5, 0, 0, 0, 2.0],
+                     [0.5, 0, 0, 3.0, 0]])  # fmt: skip
+    assert row_kinds(rows, tau, NO_TAU).tolist() == [0, 2, NO_TAU, GENERAL]
+    assert row_kinds(rows, tau, CONSTANT, units=False).tolist() == [
+        CONSTANT,
+        GENERAL,
+        CONSTANT,
+        GENERAL,
+    ]
+
+
+def test_constant_rows_are_reduced_once_per_structure(talos):
+    """The friction rows (CONSTANT) are mapped to ``y`` at a structure's first call of
+    the kernel and kept in the workspace: a later call of the same structure leaves
+    them as they are (a poisoned copy stays poisoned), a call for another structure
+    with the same workspace writes them again."""
+    w = _controller(talos)
+    _settle(w, talos)
+    asm = w._assembly
+    qp = w.weighted_qp
+    lay = w.layout
+    const = np.flatnonzero(asm.unit[asm.m :] == CONSTANT)
+    assert len(const) >= 2 * 15  # the two feet's friction and CoP rows
+    ws, views = qp._workspace(lay.nv, lay.na, lay.n, asm.m, asm.mc)
+    Cy = views[4]
+    good = Cy[const].copy()
+    assert np.isfinite(good).all() and np.abs(good).max() > 0
+    Cy[const] = np.nan
+    qp._kernel(asm.data, ws, lay.nv, lay.na, lay.n, asm.m, asm.mc, 1e-8, False)
+    assert np.isnan(Cy[const]).all()  # kept: not this structure's first call
+    qp._structure = object()  # another structure, the same sizes and workspace
+    qp._kernel(asm.data, ws, lay.nv, lay.na, lay.n, asm.m, asm.mc, 1e-8, False)
+    assert np.array_equal(Cy[const], good)
 
 
 def test_the_qp_kernel_takes_the_rows_of_the_identity_exactly(talos):

@@ -162,8 +162,8 @@ def _compiled(layout, A, c, E, f, w, C, lo, hi, reg, act=(), up=(), guess=True, 
     act = np.asarray(act, dtype=np.intp)
     up = np.asarray(up, dtype=bool)
     status, ok = _kernels.solve(
-        data, ws, act, up, np.asarray(unit, dtype=np.intp), layout.nv, layout.na, layout.n,
-        m, mc, reg, guess, PRIMAL_TOL, DUAL_TOL, 1e6,
+        data, ws, act, up, np.asarray(unit, dtype=np.intp), True, layout.nv, layout.na,
+        layout.n, m, mc, reg, guess, PRIMAL_TOL, DUAL_TOL, 1e6,
     )  # fmt: skip
     views = {k: ws[o : o + int(np.prod(sh))].reshape(sh) for k, (o, sh) in lay.items() if sh}
     return status, ok, views
@@ -199,8 +199,15 @@ def test_kernels_match_numpy(panda, talos):
     status, ok, got = _compiled(
         w.layout, A, c, E, f, wt, C, lo, hi, w.regularisation, qp_np._active, qp_np._upper
     )
-    assert status == 0
-    _assert_same(ref, got)
+    assert status == 0 and ok
+    # an accepted guess leaves H's lower triangle (all the guess reads); a refused one,
+    # or none asked for, the whole symmetric H (DAQP reads it)
+    _assert_same((np.tril(ref[0]), *ref[1:]), {**got, "H": np.tril(got["H"])})
+    _status, refused, whole = _compiled(
+        w.layout, A, c, E, f, wt, C, lo, hi, w.regularisation, guess=False
+    )
+    assert not refused
+    _assert_same(ref, whole)
     H, g, Au, cu, Cy, lo_y, hi_y, _Tt, _tt = ref
     y_np = qp_np._try_guess(H, g, Au, cu, Cy, lo_y, hi_y, lo == hi)
     assert y_np is not None and ok and len(qp_np._active)

@@ -389,13 +389,13 @@ WBC_DYNAMICS, WBC_CONTACT, WBC_TASK, WBC_COST = 0, 1, 2, 3
 #: Its ``code`` rows: kind, row, column, rows, then positions of arrays and scalars.
 WBC_FIELDS = 10
 #: The matrices and vectors one of its calls takes (a longer program: several calls).
-WBC_MATS, WBC_VECS = 9, 12
+WBC_MATS, WBC_VECS = 10, 16
 
 
 def _write_problem(  # pragma: no cover - compiled
     data, offs, nv, n, m, mc, code, scal, M, b,
-    m0, m1, m2, m3, m4, m5, m6, m7, m8,
-    v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11,
+    m0, m1, m2, m3, m4, m5, m6, m7, m8, m9,
+    v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15,
 ):  # fmt: skip
     """Write the entries of a whole-body problem that change with the state, into the
     packed array ``data``: ``A`` (nv x n), ``c``, ``E`` (m x n), ``f``, ``w``, ``C`` (mc
@@ -426,8 +426,8 @@ def _write_problem(  # pragma: no cover - compiled
     Returns 0, or :data:`REFUSED` (an array of an unexpected shape, a row outside the
     buffers: nothing is to be used; the caller writes the tick in Python).
     """
-    mats = (m0, m1, m2, m3, m4, m5, m6, m7, m8)
-    vecs = (v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11)
+    mats = (m0, m1, m2, m3, m4, m5, m6, m7, m8, m9)
+    vecs = (v0, v1, v2, v3, v4, v5, v6, v7, v8, v9, v10, v11, v12, v13, v14, v15)
     A = data[offs[0] : offs[0] + nv * n].reshape((nv, n))
     c = data[offs[1] : offs[1] + nv]
     E = data[offs[2] : offs[2] + m * n].reshape((m, n))

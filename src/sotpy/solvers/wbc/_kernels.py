@@ -132,6 +132,10 @@ def _put_row(out, row, b, hmax, sr, bs, p, n):  # pragma: no cover - compiled
     bs[p] = scale * b
 
 
+#: The kinds of rows in ``unit`` besides a column (see :func:`_solve_lower`).
+GENERAL, NO_TAU, CONSTANT = -1, -2, -3
+
+
 def _data_views(data, nv, n, m, mc):  # pragma: no cover - compiled
     """The views ``(A, c, E, f, w, C, lo, hi)`` of the packed input (:func:`data_layout`)."""
     o = 0
@@ -154,16 +158,44 @@ def _data_views(data, nv, n, m, mc):  # pragma: no cover - compiled
 
 
 def _solve(
-    data, ws, act, up, unit, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
+    data, ws, act, up, unit, fresh, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
+):  # pragma: no cover - compiled
+    """:func:`_solve_lower`, then, unless the guess was accepted, ``H``'s upper triangle
+    mirrored from its lower one (the caller's other solvers read all of it; the guess
+    reads only the lower one)."""
+    status, ok = _solve_lower_c(
+        data, ws, act, up, unit, fresh, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
+    )
+    if not ok:
+        ny = n - na
+        H = ws[: ny * ny].reshape((ny, ny))
+        for a in range(ny):
+            for b in range(a):
+                H[b, a] = H[a, b]
+    return status, ok
+
+
+def _solve_lower(
+    data, ws, act, up, unit, fresh, nv, na, n, m, mc, reg, guess, ptol, dtol_rel, lam_max
 ):  # pragma: no cover - compiled
     """``(status, ok)``: the reduced QP of :meth:`.qp.WeightedQP.reduce` written to the
-    workspace and, if ``guess``, the guessed active set's solution ``y`` (``ok``:
-    accepted). ``status``: 0, or 1 (a NaN bound), 2 (a row with lower > upper +
-    1e-12). The actuated rows of ``A`` are its last ``na`` rows. ``unit`` (size ``m +
-    mc``, the task rows then the constraint rows; or empty): the column of a row whose
-    only nonzero entry is a 1 (a posture, a torque or joint limit), -1 for the others;
-    such a row costs one update of ``H`` (or a copy of ``T_tau``'s row) instead of a
-    pass over ``n`` columns."""
+    workspace (``H``: its lower triangle) and, if ``guess``, the guessed active set's
+    solution ``y`` (``ok``: accepted). ``status``: 0, or 1 (a NaN bound), 2 (a row
+    with lower > upper + 1e-12). The actuated rows of ``A`` are its last ``na`` rows.
+
+    ``unit`` (size ``m + mc``, the task rows then the constraint rows; or empty: every
+    row ``GENERAL``) says what the kernel may skip in each row:
+
+    * ``>= 0``: the column of the row's only nonzero entry, a 1 (a posture, a torque or
+      joint limit): one update of ``H``, or a copy of ``T_tau``'s row, instead of a pass
+      over ``n`` columns;
+    * ``NO_TAU``: no entry in the torque columns (a Jacobian row, a friction row): no
+      pass over them;
+    * ``CONSTANT`` (constraint rows): no torque entry and the same row at every call of
+      this structure: its row over ``y`` is written only when ``fresh`` (the first call
+      of the structure with this workspace; the caller knows) and kept in the
+      workspace after;
+    * ``GENERAL``: none of these."""
     ny = n - na
     nu = nv - na
     kmax = nu + mc
@@ -236,27 +268,40 @@ def _solve(
         if wi == 0.0:
             continue
         fyi = f[i]
-        col = -1 if general else unit[i]
+        col = GENERAL if general else unit[i]
         if col >= 0 and (col < nv or col >= nv + na):  # one entry 1 on a or f
             yc = col if col < nv else col - na
             H[yc, yc] += wi
             g[yc] -= wi * fyi
             continue
+        k = 0  # the nonzero entries of the row over y, as it is copied
         for j in range(nv):
-            ey[j] = E[i, j]
-        for j in range(nv, ny):
-            ey[j] = E[i, j + na]
-        for j in range(na):
-            e = E[i, nv + j]
+            e = E[i, j]
+            ey[j] = e
             if e != 0.0:
-                for col in range(ny):
-                    ey[col] += e * Tt[j, col]
-                fyi -= e * tt[j]
-        k = 0
-        for col in range(ny):
-            if ey[col] != 0.0:
-                idx[k] = col
+                idx[k] = j
                 k += 1
+        for j in range(nv, ny):
+            e = E[i, j + na]
+            ey[j] = e
+            if e != 0.0:
+                idx[k] = j
+                k += 1
+        if col == GENERAL or col >= 0:  # the torque entries (none in NO_TAU rows)
+            mapped = False
+            for j in range(na):
+                e = E[i, nv + j]
+                if e != 0.0:
+                    mapped = True
+                    for q in range(ny):
+                        ey[q] += e * Tt[j, q]
+                    fyi -= e * tt[j]
+            if mapped:
+                k = 0
+                for q in range(ny):
+                    if ey[q] != 0.0:
+                        idx[k] = q
+                        k += 1
         for p in range(k):
             a = idx[p]
             va = wi * ey[a]
@@ -264,16 +309,15 @@ def _solve(
             for q in range(p + 1):
                 b = idx[q]
                 H[a, b] += va * ey[b]
-    for a in range(ny):
-        for b in range(a):
-            H[b, a] = H[a, b]
     # the constraint rows over y: lo - C_tau tt <= (C_y + C_tau Tt) y <= hi - C_tau tt
     status = 0
     neq = 0
     for i in range(mc):
-        col = -1 if general else unit[m + i]
+        col = GENERAL if general else unit[m + i]
         s = 0.0
-        if col >= 0:  # one entry 1: a row of the identity over y, or of T_tau
+        if col == CONSTANT and not fresh:
+            pass  # its row over y is the one written at the structure's first call
+        elif col >= 0:  # one entry 1: a row of the identity over y, or of T_tau
             if nv <= col < nv + na:
                 j = col - nv
                 for q in range(ny):
@@ -288,12 +332,13 @@ def _solve(
                 Cy[i, j] = C[i, j]
             for j in range(nv, ny):
                 Cy[i, j] = C[i, j + na]
-            for j in range(na):
-                e = C[i, nv + j]
-                if e != 0.0:
-                    for q in range(ny):
-                        Cy[i, q] += e * Tt[j, q]
-                    s += e * tt[j]
+            if col == GENERAL:  # the torque entries (none in the other kinds of rows)
+                for j in range(na):
+                    e = C[i, nv + j]
+                    if e != 0.0:
+                        for q in range(ny):
+                            Cy[i, q] += e * Tt[j, q]
+                        s += e * tt[j]
         loy[i] = lo[i] - s
         hiy[i] = hi[i] - s
         if np.isnan(loy[i]) or np.isnan(hiy[i]):
@@ -454,6 +499,7 @@ _data_views = kernel(_data_views)
 _cholesky = kernel(_cholesky, fast=True)
 _forward = kernel(_forward, fast=True)
 _put_row = kernel(_put_row, fast=True)
+_solve_lower_c = kernel(_solve_lower, fast=True)
 solve = kernel(_solve, fast=True)
 _warm: list[bool] = []
 
@@ -474,7 +520,8 @@ def warm_up() -> None:
     A = data[: nv * n].reshape(nv, n)
     A[:, :nv] = np.eye(nv)
     solve(data, ws, np.zeros(1, dtype=np.intp), np.ones(1, dtype=np.bool_),
-          np.zeros(0, dtype=np.intp), nv, na, n, m, mc, 1e-8, True, 1e-9, 1e-9, 1e6)  # fmt: skip
+          np.zeros(0, dtype=np.intp), True, nv, na, n, m, mc, 1e-8, True, 1e-9, 1e-9,
+          1e6)  # fmt: skip
     solve.disable_compile()
     _warm.append(True)
     report_compile("the whole-body QP kernel", time.perf_counter() - start)

@@ -190,7 +190,8 @@ class JointTorqueLimit(Constraint):
         return len(self._bounds_kept()[0])
 
     def write(self, robot, layout, C, lo, hi, first) -> None:
-        kept = self._bounds_kept()
+        # count() has just checked the bounds (the controller calls it first each tick)
+        kept = self._kept[1] if self._kept is not None and not first else self._bounds_kept()
         if not first and kept is self._written:
             return  # the same bounds as at the previous tick, still in the buffer
         keep, lower, upper = kept

@@ -40,7 +40,7 @@ import pinocchio as pin
 
 from ..._jit import refused
 from ...tasks import _rowkernels as rk
-from ._kernels import data_layout
+from ._kernels import GENERAL, data_layout
 from .model import Layout, RobotModel
 
 __all__ = ["ProblemProgram"]
@@ -72,6 +72,17 @@ def unit_columns(rows: np.ndarray) -> np.ndarray:
     nz = rows != 0.0
     one = (nz.sum(axis=1) == 1) & (rows.max(axis=1, initial=0.0) == 1.0)
     return np.where(one, nz.argmax(axis=1), -1)
+
+
+def row_kinds(rows: np.ndarray, tau: slice, kind: int, units: bool = True) -> np.ndarray:
+    """The QP kernel's ``unit`` entries of ``rows`` (see ``_kernels.solve``): with
+    ``units``, a row of the identity gives its column; another row without torque
+    entries (columns ``tau``) gives ``kind``, and one with them ``GENERAL``."""
+    out = np.where(np.any(rows[:, tau] != 0.0, axis=1), GENERAL, kind)
+    if units:
+        cols = unit_columns(rows)
+        out = np.where(cols >= 0, cols, out)
+    return out
 
 
 class _Call:
@@ -144,10 +155,16 @@ class ProblemProgram:
         calls = [_Call()]
         calls[0].code.append([rk.WBC_DYNAMICS] + [-1] * (rk.WBC_FIELDS - 1))
 
-        def call_for(mats: int, vecs: int) -> _Call:
-            if not calls[-1].fits(mats, vecs):
+        def call_for(mats: int, vecs: int, shared: str = "") -> _Call:
+            """The call with room for ``mats`` and ``vecs`` more arrays, and for the
+            vector ``shared`` (``"v"``, ``"loads"``: one per call) if it has none."""
+            need = vecs + int(bool(shared) and getattr(calls[-1], shared) < 0)
+            if not calls[-1].fits(mats, need):
                 calls.append(_Call())
-            return calls[-1]
+            call = calls[-1]
+            if shared and getattr(call, shared) < 0:
+                setattr(call, shared, call.vec())
+            return call
 
         r = contact_row
         for c, state, nf, ramp, sl, st in contact_plan:
@@ -160,11 +177,9 @@ class ProblemProgram:
                 r += d
                 continue
             fb = st is not None and st.has_feedback
-            call = call_for(1 + 2 * fb, 1 + fb)  # J, H and Hd; drift, qdot
+            call = call_for(1 + 2 * fb, 1, "v" if fb else "")  # J, H, Hd; drift; qdot
             jm, iu = call.mat(), call.vec()
             ih, ihd = (call.mat(), call.mat()) if fb else (-1, -1)
-            if fb and call.v < 0:
-                call.v = call.vec()
             s = len(call.scal) if fb else -1
             if fb:
                 call.scal += list(c.gains)
@@ -191,9 +206,7 @@ class ProblemProgram:
         count = max(1, sum(1 for c in layout.contacts if not c.bilateral))
         for c in contacts:
             k = 2 if c.dim == 3 else 5
-            call = call_for(0, 1)
-            if call.loads < 0:
-                call.loads = call.vec()
+            call = call_for(0, 0, "loads")
             s = len(call.scal)
             call.weights.append(s)
             call.scal += [wrench_cost.weight, max(c.fmin, 0.02 * robot.weight),

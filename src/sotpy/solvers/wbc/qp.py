@@ -108,7 +108,9 @@ class WeightedQP:
         self._ws: tuple | None = None  # (sizes, workspace, views) of the compiled kernel
         self._active = np.zeros(0, dtype=np.intp)  # indices into the constraint rows
         self._upper = np.zeros(0, dtype=bool)  # at the upper bound (else the lower)
-        self._unit = _NO_UNIT  # the rows of the identity (see solve_rows)
+        self._unit = _NO_UNIT  # what each row is (see solve_rows)
+        self._structure: object = None  # whose constant rows ``unit`` marks
+        self._written: tuple | None = None  # (structure, workspace) of the last call
 
     def forget(self) -> None:
         """Drop the active-set guess (the next solve calls DAQP)."""
@@ -179,6 +181,7 @@ class WeightedQP:
         packed=None,
         keep: int = 0,
         unit: np.ndarray | None = None,
+        structure: object = None,
     ) -> tuple[np.ndarray | None, str]:
         """:meth:`solve` with the task rows stacked (``E`` m x n, ``f``, ``w`` = diag W).
         ``packed``: the flat array the arrays are views of, laid out by
@@ -186,12 +189,16 @@ class WeightedQP:
         are copied into one for the compiled kernel. ``keep``: the constraint rows of
         the previous solve kept at the same places when the number of rows changed
         (rows appended or removed at the end): its active set is still a guess there.
-        ``unit``: for the compiled kernel, the column of each task then constraint row
-        whose only nonzero entry is a 1, -1 for the others (``_kernels.solve``; the
-        controller's :meth:`~.solver.WholeBodyController.problem` knows them)."""
+        ``unit``: for the compiled kernel, what each task then constraint row is (a row
+        of the identity, without torque entries, constant: ``_kernels.solve``; the
+        controller's :meth:`~.solver.WholeBodyController.problem` knows it), and
+        ``structure``: an object that stays the same exactly while the rows marked
+        constant do (the kernel then keeps what it computed for them)."""
         nv, na, n = layout.nv, layout.na, layout.n
         m, mc = E.shape[0], C.shape[0]
-        self._unit = unit if unit is not None and len(unit) == m + mc else _NO_UNIT
+        known = unit is not None and len(unit) == m + mc and structure is not None
+        self._unit = unit if known else _NO_UNIT
+        self._structure = structure if known else None
         key = (n, mc, nv - na)
         self.last_residual: float | None = None
         if key != self._key and self._key is not None and keep and self._key[0::2] == key[0::2]:
@@ -253,9 +260,11 @@ class WeightedQP:
         return chi, ""
 
     def _kernel(self, packed, ws, nv, na, n, m, mc, reg, guess) -> tuple[int, bool]:
+        fresh = self._written != (self._structure, id(ws))
+        self._written = (self._structure, id(ws))
         return _kernels.solve(
-            packed, ws, self._active, self._upper, self._unit, nv, na, n, m, mc, reg, guess,
-            PRIMAL_TOL, DUAL_TOL, _LAMBDA_MAX,
+            packed, ws, self._active, self._upper, self._unit, fresh, nv, na, n, m, mc, reg,
+            guess, PRIMAL_TOL, DUAL_TOL, _LAMBDA_MAX,
         )  # fmt: skip
 
     def _workspace(self, nv: int, na: int, n: int, m: int, mc: int) -> tuple[np.ndarray, list]:

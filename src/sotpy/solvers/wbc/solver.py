@@ -84,7 +84,7 @@ from ... import _jit
 from ...errors import SotpyError, SotpyWarning
 from ...tasks import _rowkernels
 from ..hierarchy import NUMPY_BUDGET_FACTOR, HierarchySolver
-from ._kernels import data_layout
+from ._kernels import CONSTANT, GENERAL, NO_TAU, data_layout
 from .constraints import (
     Constraint,
     ContactConstraint,
@@ -92,7 +92,7 @@ from .constraints import (
     JointTorqueLimit,
 )
 from .model import BilateralContactSpec, ContactSpec, Layout, RobotModel
-from .program import ProblemProgram, owns, unit_columns
+from .program import ProblemProgram, owns, row_kinds
 from .qp import WeightedQP, _as_index, _to_y_into, packed_views
 from .tasks import ContactWrenchCost, Task
 
@@ -406,7 +406,9 @@ class WholeBodyController:
         ramping = False  # a ramp under way (begin() is False only when inactive)
         for objects in (self.tasks, self.constraints, self.contact_states):
             for x in objects.values():
-                if x.begin(t, dt):
+                if x.state == "active" and x.callbacks["onComputeBegin"] is None:
+                    live.append(x)  # what begin() does for it: nothing to advance
+                elif x.begin(t, dt):
                     live.append(x)
                     ramping = ramping or x.state != "active"
             if objects is self.constraints:
@@ -420,7 +422,8 @@ class WholeBodyController:
             sol = self.solve(rate=self.transition or ramping)
         finally:
             for x in live:
-                x.end(t, dt)
+                if x.state != "active" or x.callbacks["onComputeEnd"] is not None:
+                    x.end(t, dt)  # (an active object without callbacks: nothing to end)
         if self.transition and not ramping and not self._at_rate_bound(sol):
             self.transition = False  # settled: the torques caught up
         self.last = sol
@@ -632,7 +635,7 @@ class WholeBodyController:
         if asm is not None and asm.tasks is tasks:  # the stacked rows of problem()
             x, reason = qp.solve_rows(
                 self.layout, *dyn, asm.E, asm.f, asm.w, *cons, self.regularisation, asm.data,
-                self._keep_rows, asm.unit,
+                self._keep_rows, asm.unit, asm,
             )  # fmt: skip
         else:
             x, reason = qp.solve(self.layout, dyn, cons, tasks, self.regularisation)
@@ -759,6 +762,7 @@ class _Assembly:
             self._task_starts.append(r)
             self.tasks.append((task.level, *rows))
             r += k
+        self.cost_rows = None
         if ncost:
             self.cost_rows = (self.E[r:], self.f[r:], self.w[r:])
             self.tasks.append((-1, *self.cost_rows))
@@ -782,6 +786,22 @@ class _Assembly:
         for k in counts:
             self.con_rows.append((self.C[r : r + k], self.lo[r : r + k], self.hi[r : r + k]))
             r += k
+        # the contact constraint's blocks of rows and what the QP kernel may skip in them
+        self._tau = layout.tau
+        self._contact_blocks = []
+        c0 = r
+        for c, state, nf, ramp, _sl, _st in cc._planned(layout):
+            d = c.dim
+            if state == "inactive":  # f_c = 0: rows of the identity
+                self._contact_blocks.append((GENERAL, c0, c0 + d))
+                c0 += d
+                continue
+            self._contact_blocks += [
+                (NO_TAU, c0, c0 + d),  # J_c a = ...: the program writes their a columns
+                (CONSTANT, c0 + d, c0 + d + nf),  # friction and CoP
+                (GENERAL, c0 + d + nf, c0 + d + nf + ramp),  # the ramp's: the identity
+            ]
+            c0 += d + nf + ramp
         self.contact_rows = (
             self.C[r : r + ncontact],
             self.lo[r : r + ncontact],
@@ -806,21 +826,32 @@ class _Assembly:
             self.unfused = sorted(set(self.unfused) - set(self.program.fused))
 
     def find_units(self, live: list, cons: list, rate: bool) -> None:
-        """After the first write: :attr:`unit`, for each task row then constraint row,
-        the column of its only nonzero entry when it is a 1 and the row is constant (its
-        object's ``unit_rows``, and the torque-rate rows), else -1 (the QP kernel's
-        ``unit``)."""
-        unit = np.full(self.m + self.mc, -1, dtype=np.intp)
+        """After the first write: :attr:`unit`, what each task row then constraint row
+        is, for the QP kernel (``_kernels.solve``): the column of a row of the identity
+        (constant rows: their object's ``unit_rows``, the ramps' and the torque rate's),
+        ``NO_TAU`` for a row without torque entries that the program or a ``terms()``
+        task writes (only its ``a`` columns change), ``CONSTANT`` for the contacts'
+        friction rows, ``GENERAL`` otherwise."""
+        tau = self._tau
+        unit = np.full(self.m + self.mc, GENERAL, dtype=np.intp)
         for (task, _w), (E, _f, _wv), r in zip(live, self.task_rows, self._task_starts,
                                                 strict=True):  # fmt: skip
             if owns(task, "unit_rows") and task.unit_rows:
-                unit[r : r + len(E)] = unit_columns(E)
+                unit[r : r + len(E)] = row_kinds(E, tau, GENERAL)
+            elif owns(task, "terms"):
+                unit[r : r + len(E)] = row_kinds(E, tau, NO_TAU, units=False)
+        if self.cost_rows is not None:  # constant rows over the wrenches
+            E = self.cost_rows[0]
+            unit[self.m - len(E) : self.m] = row_kinds(E, tau, NO_TAU, units=False)
         r = self.m
         for con, (C, _lo, _hi) in zip(cons, self.con_rows, strict=True):
             if owns(con, "unit_rows") and con.unit_rows:
-                unit[r : r + len(C)] = unit_columns(C)
+                unit[r : r + len(C)] = row_kinds(C, tau, GENERAL)
             r += len(C)
+        for kind, a, b in self._contact_blocks:  # the contact constraint's rows
+            rows = self.C[a:b]
+            unit[self.m + a : self.m + b] = row_kinds(rows, tau, kind, units=kind != NO_TAU)
         if rate:
             C = self.rate_rows[0]
-            unit[self.m + self.mc - len(C) :] = unit_columns(C)
+            unit[self.m + self.mc - len(C) :] = row_kinds(C, tau, GENERAL)
         self.unit = unit
