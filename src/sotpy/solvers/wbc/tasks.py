@@ -121,12 +121,19 @@ class Task(Activatable):
     def _weights(self) -> tuple[np.ndarray, bool]:
         """``(diag(W), whether a row has a weight > 0)``, kept until a setter or the
         ramp changes them."""
-        key = (self.ramp, self.weight, id(self.row_weights), id(self.selection))
         cached = self._w_cache
-        if cached is None or cached[0] != key:
+        if (
+            cached is None
+            or cached[0] != self.ramp
+            or cached[1] != self.weight
+            or cached[2] is not self.row_weights
+            or cached[3] is not self.selection
+        ):
             w = ramp_weight(self.ramp) * self.weight * self.row_weights * self.selection
-            cached = self._w_cache = (key, w, bool(w.any()))
-        return cached[1], cached[2]
+            cached = self._w_cache = (
+                self.ramp, self.weight, self.row_weights, self.selection, w, bool(w.any())
+            )  # fmt: skip
+        return cached[4], cached[5]
 
     def rows(self, robot: RobotModel, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
         """``(E, f)`` at the robot's current state (fresh arrays; by :meth:`write`)."""
