@@ -10,7 +10,7 @@ microsecond or more: as much as the QP itself on Talos. A :class:`ProblemProgram
 (made when the problem's structure changes, with its buffers) lists one operation per
 entry block (``WBC_DYNAMICS``, ``WBC_CONTACT``, ``WBC_TASK``) and, per tick, takes the
 arrays from Pinocchio and the tasks (its *gathers*: no copies) and hands them to one
-call of :func:`sotpy.tasks._rowkernels.write_problem`.
+call of ``sotpy.tasks._rowkernels.write_problem``.
 
 Rules that keep it exact:
 
@@ -43,7 +43,7 @@ from ...tasks import _rowkernels as rk
 from ._kernels import GENERAL, data_layout
 from .model import Layout, RobotModel
 
-__all__ = ["ProblemProgram"]
+__all__ = ["ProblemProgram", "owns", "row_kinds", "unit_columns"]
 
 #: ``gather(args)``: put this tick's arrays at the operation's positions of ``args``
 #: (the kernel's ``m0, ..., v0, ...`` arguments, in that order).
@@ -126,11 +126,11 @@ class ProblemProgram:
     Args:
         robot, layout: the controller's model and layout.
         contact_plan: the contact constraint's plan, ``[(spec, state, nf, ramp, slice,
-            ContactState)]`` in layout order (:meth:`.constraints.ContactConstraint.
-            structure`), and ``contact_row``: its first row in ``C``.
+            ContactState)]`` in layout order (``ContactConstraint.structure``), and
+            ``contact_row``: its first row in ``C``.
         tasks: ``[(task, first row in E)]``, the live tasks in the order of
             :meth:`run`'s ``live``; those whose :meth:`~.tasks.Task.terms` are their
-            own join the program (:attr:`fused`, their indices).
+            own join the program (``fused``: their indices).
         cost: ``(ContactWrenchCost, its contacts, its first row in E)``: the program
             writes its weights (from the loads of the last solution observed).
         sizes: ``(nv, n, m, mc)`` of the buffers.
