@@ -310,3 +310,17 @@ def test_the_qp_kernel_takes_the_rows_of_the_identity_exactly(talos):
         assert np.array_equal(np.isinf(a), np.isinf(b))  # one-sided rows stay so
         fa, fb = a[np.isfinite(b)], b[np.isfinite(b)]
         assert np.allclose(fa, fb, rtol=1e-12, atol=1e-12 * (1 + np.abs(fb).max(initial=0)))
+
+
+def test_frame_placements_are_computed_when_read(talos):
+    """RobotModel.update does not place every frame; a frame read through the model is
+    placed at the state of the last update (Pinocchio's framesForwardKinematics)."""
+    w = _controller(talos)
+    ref = talos.model.createData()
+    for q, v in _states(talos, 3, 9):
+        w.robot.update(q, v)
+        pin.framesForwardKinematics(talos.model, ref, q)
+        for name in ("arm_right_7_link", FEET[0], "head_2_link"):
+            fid = talos.model.getFrameId(name)
+            got = w.robot.frame_placement(fid)
+            assert np.allclose(got.homogeneous, ref.oMf[fid].homogeneous, atol=1e-12)

@@ -358,7 +358,7 @@ class ContactState(Activatable):
         at its first call."""
         fid = robot.frame_id(self.spec.frame)
         data = robot.data
-        e = self.pose_error(data.oMf[fid])
+        e = self.pose_error(pin.updateFramePlacement(robot.model, data, fid))
         return e, pin.getFrameVelocity(robot.model, data, fid, _LOCAL).vector
 
     def pose_error(self, M: pin.SE3) -> np.ndarray:

@@ -29,7 +29,11 @@ effects, gravity, CoM) and then answers:
   *spatial* acceleration in the frame (``pin.getFrameAcceleration``), the time
   derivative of the LOCAL twist ``J v``: a contact held fixed (twist 0) needs
   ``J a + drift = 0``;
-* ``com``, ``com_velocity``, ``Jcom`` (3 x nv, world), ``com_drift`` (``dJcom v``).
+* ``com``, ``com_velocity``, ``Jcom`` (3 x nv, world), ``com_drift`` (``dJcom v``);
+* ``frame_placement(fid)``: a frame's placement. The frames' placements are computed
+  when read (``pin.updateFramePlacement``, for the frames a tick uses: on Talos 121
+  frames would cost a microsecond a tick), so ``data.oMf[fid]`` is that frame's only
+  after a read of it (``frame_placement``, a frame Jacobian or drift).
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ __all__ = ["BilateralContactSpec", "ContactSpec", "Layout", "RobotModel"]
 
 LWA = pin.LOCAL_WORLD_ALIGNED
 _sum = np.add.reduce
+_placement = pin.updateFramePlacement  # one frame's oMf, computed and returned
 _ACCELERATION = pin.KinematicLevel.ACCELERATION
 
 
@@ -236,7 +241,6 @@ class RobotModel:
         # bias of its forward pass: the drifts), as forwardKinematics(q, v, 0) would leave
         # them (tests/test_wbc_core.py checks it)
         pin.computeAllTerms(m, d, q, v)
-        pin.updateFramePlacements(m, d)
         pin.centerOfMass(m, d, _ACCELERATION, False)  # vcom, acom of data.a (dJcom v)
         self._M_stale = True
         np.copyto(self.b, d.nle)
@@ -275,7 +279,9 @@ class RobotModel:
 
     # -- frames -------------------------------------------------------------------------
     def frame_placement(self, fid: int) -> pin.SE3:
-        return pin.SE3(self.data.oMf[fid])
+        """The placement of frame ``fid`` at the last :meth:`update` (a copy; computed
+        now, with ``data.oMf[fid]``)."""
+        return pin.SE3(_placement(self.model, self.data, fid))
 
     def frame_jacobian(self, fid: int, ref: pin.ReferenceFrame = LWA) -> np.ndarray:
         return pin.getFrameJacobian(self.model, self.data, fid, ref)
@@ -301,7 +307,8 @@ class RobotModel:
         if not c.bilateral:
             return self.frame_jacobian(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
         fa, fb = self.frame_id(c.frame_a), self.frame_id(c.frame_b)
-        M = self.data.oMf[fb].actInv(self.data.oMf[fa])
+        m, d = self.model, self.data
+        M = _placement(m, d, fb).actInv(_placement(m, d, fa))
         return self.frame_jacobian(fb, pin.LOCAL) - M.action @ self.frame_jacobian(fa, pin.LOCAL)
 
     def contact_drift(self, c: ContactSpec | BilateralContactSpec) -> np.ndarray:
@@ -317,7 +324,7 @@ class RobotModel:
             return self.frame_drift(self.frame_id(c.frame), pin.LOCAL)[: c.dim]
         m, d = self.model, self.data
         fa, fb = self.frame_id(c.frame_a), self.frame_id(c.frame_b)
-        M = d.oMf[fb].actInv(d.oMf[fa])
+        M = _placement(m, d, fb).actInv(_placement(m, d, fa))
         nu_a = pin.getFrameVelocity(m, d, fa, pin.LOCAL)
         nu_b = pin.getFrameVelocity(m, d, fb, pin.LOCAL)
         da = pin.getFrameAcceleration(m, d, fa, pin.LOCAL)

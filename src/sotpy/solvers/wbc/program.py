@@ -53,6 +53,7 @@ _LOCAL = pin.LOCAL
 _NO_LOADS = np.zeros(0)  # no solution observed yet: the cost's default loads
 _frame_jacobian = pin.getFrameJacobian
 _frame_acceleration = pin.getFrameAcceleration
+_placement = pin.updateFramePlacement
 
 
 def owns(obj: object, attr: str) -> bool:
@@ -258,7 +259,7 @@ class ProblemProgram:
                     args[jm] = _frame_jacobian(model, d, fid, _LOCAL)
                     args[iu] = _frame_acceleration(model, d, fid, _LOCAL).vector
                     if st is not None:
-                        M = d.oMf[fid]
+                        M = _placement(model, d, fid)
                         args[ih] = M.homogeneous
                         args[ihd] = st.reference_homogeneous(M)
                 if call.v >= 0:
