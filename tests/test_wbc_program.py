@@ -324,3 +324,49 @@ def test_frame_placements_are_computed_when_read(talos):
             fid = talos.model.getFrameId(name)
             got = w.robot.frame_placement(fid)
             assert np.allclose(got.homogeneous, ref.oMf[fid].homogeneous, atol=1e-12)
+
+
+def test_a_subclass_begin_is_called_at_every_tick(talos):
+    """The tick skips Activatable.begin/end for an active object without callbacks;
+    a subclass's own begin (here: a target that moves) is still called every tick."""
+
+    class Moving(CoMAccelerationTask):
+        def begin(self, t, dt):
+            self.setDesired([0.0, 0.1 * t, 0.0])
+            return super().begin(t, dt)
+
+    w = _controller(talos)
+    task = w.addTask(Moving("moving", 1.0))
+    task.activate()
+    q, v = next(_states(talos, 1, 10))
+    for k in range(3):
+        w.update(q, v, 0.5 * (k + 1), 1e-3)
+        assert task.state == "active" and task.desired[1] == 0.05 * (k + 1)
+
+
+def test_a_torque_limit_shared_by_two_controllers_reaches_both(talos):
+    """New bounds of a constraint added to two controllers reach both problems (the
+    write skipped when nothing changed is skipped per buffer)."""
+    limit = None
+    ws = []
+    for _ in range(2):
+        w = _controller(talos)
+        if limit is None:
+            limit = w.constraints["tau"]
+        else:
+            w.remove("tau")
+            w.addConstraint(limit)
+        ws.append(w)
+    q, v = next(_states(talos, 1, 11))
+    for w in ws:
+        w.update(q, v, 0.0, 1e-3)
+        w.update(q, v, 0.0, 1e-3)
+    limit.upper = limit.upper * 0.5  # new bounds, the same kept joints
+    for w in ws:
+        w.update(q, v, 0.0, 1e-3)
+        r = 0  # the torque limit's first row: after the constraints before it
+        for con in w.constraints.values():
+            if con is limit:
+                break
+            r += con.count(w.robot, w.layout)
+        assert np.array_equal(w._assembly.hi[r : r + len(limit.upper)], limit.upper)

@@ -175,7 +175,7 @@ class JointTorqueLimit(Constraint):
             robot.na,
         )
         self._kept: tuple | None = None
-        self._written: tuple | None = None  # the bounds last written (write)
+        self._written: tuple | None = None  # (bounds, buffer) last written (write)
 
     def _bounds_kept(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(kept joints, their lower and upper bounds): recomputed when the bounds change
@@ -192,14 +192,15 @@ class JointTorqueLimit(Constraint):
     def write(self, robot, layout, C, lo, hi, first) -> None:
         # count() has just checked the bounds (the controller calls it first each tick)
         kept = self._kept[1] if self._kept is not None and not first else self._bounds_kept()
-        if not first and kept is self._written:
-            return  # the same bounds as at the previous tick, still in the buffer
+        written = self._written
+        if not first and written is not None and written[0] is kept and written[1] is lo:
+            return  # the same bounds as at the previous tick, still in this buffer
         keep, lower, upper = kept
         if first:
             C[np.arange(len(keep)), layout.tau.start + keep] = 1.0
         lo[:] = lower
         hi[:] = upper
-        self._written = kept
+        self._written = (kept, lo)  # (a constraint in two controllers: per buffer)
 
 
 class JointAccelerationLimit(Constraint):

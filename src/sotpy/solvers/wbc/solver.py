@@ -85,6 +85,7 @@ from ...errors import SotpyError, SotpyWarning
 from ...tasks import _rowkernels
 from ..hierarchy import NUMPY_BUDGET_FACTOR, HierarchySolver
 from ._kernels import CONSTANT, GENERAL, NO_TAU, data_layout
+from .activation import Activatable
 from .constraints import (
     Constraint,
     ContactConstraint,
@@ -105,6 +106,10 @@ STRATEGIES = ("OneLevelWeighted", "MultiLevelWeighted")
 #: (the kinematic SOT's solver gets 0.5 ms: its iterations cost about 40 us); the NumPy
 #: twin (no compiled kernels) gets ``NUMPY_BUDGET_FACTOR`` times it, as the SOT's does
 HIERARCHY_TIME_BUDGET = 1.5e-3
+
+#: Activatable's own begin/end: the tick skips them for an active object without
+#: callbacks (a subclass that overrides them is always called)
+_BEGIN, _END = Activatable.begin, Activatable.end
 
 #: The default torque rate bound of transitions: each joint's effort limit per
 #: ``RATE_TIME`` seconds (N m/s).
@@ -406,7 +411,11 @@ class WholeBodyController:
         ramping = False  # a ramp under way (begin() is False only when inactive)
         for objects in (self.tasks, self.constraints, self.contact_states):
             for x in objects.values():
-                if x.state == "active" and x.callbacks["onComputeBegin"] is None:
+                if (
+                    x.state == "active"
+                    and x.callbacks["onComputeBegin"] is None
+                    and type(x).begin is _BEGIN
+                ):
                     live.append(x)  # what begin() does for it: nothing to advance
                 elif x.begin(t, dt):
                     live.append(x)
@@ -422,7 +431,11 @@ class WholeBodyController:
             sol = self.solve(rate=self.transition or ramping)
         finally:
             for x in live:
-                if x.state != "active" or x.callbacks["onComputeEnd"] is not None:
+                if (
+                    x.state != "active"
+                    or x.callbacks["onComputeEnd"] is not None
+                    or type(x).end is not _END
+                ):
                     x.end(t, dt)  # (an active object without callbacks: nothing to end)
         if self.transition and not ramping and not self._at_rate_bound(sol):
             self.transition = False  # settled: the torques caught up
