@@ -8,9 +8,12 @@ target and weights. Written by the objects' own Python writers (:meth:`.tasks.Ta
 :meth:`.constraints.ContactConstraint.write`) that is a few dozen NumPy calls, each a
 microsecond or more: as much as the QP itself on Talos. A :class:`ProblemProgram`
 (made when the problem's structure changes, with its buffers) lists one operation per
-entry block (``WBC_DYNAMICS``, ``WBC_CONTACT``, ``WBC_TASK``) and, per tick, takes the
-arrays from Pinocchio and the tasks (its *gathers*: no copies) and hands them to one
-call of ``sotpy.tasks._rowkernels.write_problem``.
+entry block (``WBC_DYNAMICS``: the mass matrix and ``-b``; ``WBC_CONTACT``: a contact's
+``-J^T`` in the dynamics and its rows, the pose feedback's ``log6`` computed there;
+``WBC_TASK``: a task's ``J``, target and weights; ``WBC_COST``: the wrench cost's
+weights from the last loads) and, per tick, takes the arrays from Pinocchio and the
+tasks (its *gathers*: no copies) and hands them to one call of
+``sotpy.tasks._rowkernels.write_problem``.
 
 Rules that keep it exact:
 
@@ -20,8 +23,8 @@ Rules that keep it exact:
 * a task is in the program only if its class's :meth:`.tasks.Task.terms` says what its
   :meth:`~.tasks.Task.write` computes (the built-in tasks; a subclass that overrides
   ``write`` but not ``terms`` is written by its ``write`` at every tick); the
-  constraints, the contact wrench cost's weights, the ramps' and the torque rate's rows
-  stay with their Python writers (a few bounds);
+  constraints', the contact ramps' and the torque rate's bounds stay with their Python
+  writers;
 * an array of an unexpected shape makes the kernel refuse the tick before anything is
   used (``REFUSED``), and an argument type it was not compiled for
   raises ``TypeError``: the tick is then written by the Python writers (and, for a type,
@@ -41,7 +44,9 @@ import pinocchio as pin
 from ..._jit import refused
 from ...tasks import _rowkernels as rk
 from ._kernels import GENERAL, data_layout
+from .constraints import Constraint
 from .model import Layout, RobotModel
+from .tasks import Task
 
 __all__ = ["ProblemProgram", "owns", "row_kinds", "unit_columns"]
 
@@ -63,7 +68,7 @@ def owns(obj: object, attr: str) -> bool:
     for cls in type(obj).__mro__:
         has_attr, has_write = attr in cls.__dict__, "write" in cls.__dict__
         if has_attr or has_write:
-            return has_attr and has_write and cls.__name__ not in ("Task", "Constraint")
+            return has_attr and has_write and cls not in (Task, Constraint)
     return False
 
 
