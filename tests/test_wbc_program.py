@@ -370,3 +370,33 @@ def test_a_torque_limit_shared_by_two_controllers_reaches_both(talos):
                 break
             r += con.count(w.robot, w.layout)
         assert np.array_equal(w._assembly.hi[r : r + len(limit.upper)], limit.upper)
+
+
+def test_a_first_write_that_fails_is_made_again(talos):
+    """A task whose write raises at a structure's first tick: the error reaches the
+    caller, and the next tick builds the buffers again (their constant entries, the
+    friction rows, are not left unwritten)."""
+
+    class Flaky(JointAccelerationTask):
+        fail = True
+
+        def write(self, robot, layout, E, f, first) -> None:
+            if self.fail:
+                raise RuntimeError("flaky")
+            super().write(robot, layout, E, f, first)
+
+    w = _controller(talos)
+    _settle(w, talos)
+    flaky = w.addTask(Flaky("flaky", w.robot.na, 1e-3))
+    flaky.state, flaky.ramp = "active", 1.0  # active at once: no ramp, no transition
+    q, v = next(_states(talos, 1, 12))
+    w.robot.update(q, v)
+    with pytest.raises(RuntimeError, match="flaky"):
+        w.problem(False)  # the task's first tick: a new structure
+    assert w._assembly is None
+    flaky.fail = False
+    w.problem(False)  # the same structure as the failed tick's
+    w.problem(False)
+    asm = w._assembly
+    const = np.flatnonzero(asm.unit[asm.m :] == CONSTANT)
+    assert len(const) and np.abs(asm.C[const]).sum(axis=1).min() > 0  # friction rows there

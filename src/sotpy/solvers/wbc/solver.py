@@ -530,6 +530,21 @@ class WholeBodyController:
             asm = self._assembly = _Assembly(
                 key, layout, robot, live, cons, counts, cc, self.contact_cost, cost, rate_keep
             )
+        try:
+            self._write(asm, first, live, cons, cost, rate_keep, bounds)
+        except BaseException:
+            if first:  # its constant entries may be missing: made again at the next tick
+                self._assembly = None
+            raise
+        if first:
+            asm.find_units(live, cons, rate_keep is not None)
+        return (asm.A, asm.c), (asm.C, asm.lo, asm.hi), asm.tasks
+
+    def _write(self, asm, first, live, cons, cost, rate_keep, bounds) -> None:
+        """Write this tick's rows into ``asm``'s buffers (``first``: they are new, the
+        constant entries too); see :meth:`problem`."""
+        robot, layout = self.robot, self.layout
+        cc = self.contact_constraint
         # the entries that change with the state: by the compiled program (not on a
         # structure's first tick, which writes the constant entries too), else in Python
         program = asm.program
@@ -560,9 +575,6 @@ class WholeBodyController:
             lo[:] = bounds[0][rate_keep]
             hi[:] = bounds[1][rate_keep]
         self._rate_rows = 0 if rate_keep is None else len(rate_keep)
-        if first:
-            asm.find_units(live, cons, rate_keep is not None)
-        return (asm.A, asm.c), (asm.C, asm.lo, asm.hi), asm.tasks
 
     def solve(self, rate: bool = False) -> Solution:
         """Solve at the last :meth:`RobotModel.update` (``rate``: with the torque-rate
