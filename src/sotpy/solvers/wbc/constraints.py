@@ -338,7 +338,9 @@ class ContactState(Activatable):
         self.ramp = 1.0
         self.scale: np.ndarray | None = None
         #: the placement the contact feedback holds (``ContactSpec.kp``): the frame's
-        #: placement at the first tick after the contact was created or activated
+        #: placement at the first tick after the contact was created or activated. To
+        #: move it, assign a new ``SE3``: the compiled writer keeps the matrix of the
+        #: object it last saw (an ``SE3`` changed in place is not seen)
         self.reference: pin.SE3 | None = None
         self._reference_h: tuple | None = None  # (reference, its homogeneous matrix)
 
