@@ -400,3 +400,26 @@ def test_a_first_write_that_fails_is_made_again(talos):
     asm = w._assembly
     const = np.flatnonzero(asm.unit[asm.m :] == CONSTANT)
     assert len(const) and np.abs(asm.C[const]).sum(axis=1).min() > 0  # friction rows there
+
+
+def test_a_reference_moved_in_place_reaches_the_rows(talos):
+    """The contact feedback's reference changed in place (its translation): the next
+    tick's contact rows use it, as Pinocchio computes them."""
+    w = _controller(talos)
+    _settle(w, talos)
+    st = w.contact_states[FEET[0]]
+    st.reference.translation[2] += 0.01
+    q, v = next(_states(talos, 1, 13))
+    w.robot.update(q, v)
+    w.problem(False)
+    asm = w._assembly
+    m, d = talos.model, w.robot.data
+    fid = m.getFrameId(FEET[0])
+    kp, kd = st.spec.gains
+    rhs = -(
+        pin.getFrameAcceleration(m, d, fid, pin.LOCAL).vector
+        + kp * pin.log6(st.reference.actInv(d.oMf[fid])).vector
+        + kd * pin.getFrameVelocity(m, d, fid, pin.LOCAL).vector
+    )
+    r = sum(c.count(w.robot, w.layout) for c in w.constraints.values())
+    assert np.allclose(asm.lo[r : r + 6], rhs, atol=1e-10)

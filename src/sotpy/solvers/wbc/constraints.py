@@ -338,11 +338,8 @@ class ContactState(Activatable):
         self.ramp = 1.0
         self.scale: np.ndarray | None = None
         #: the placement the contact feedback holds (``ContactSpec.kp``): the frame's
-        #: placement at the first tick after the contact was created or activated. To
-        #: move it, assign a new ``SE3``: the compiled writer keeps the matrix of the
-        #: object it last saw (an ``SE3`` changed in place is not seen)
+        #: placement at the first tick after the contact was created or activated
         self.reference: pin.SE3 | None = None
-        self._reference_h: tuple | None = None  # (reference, its homogeneous matrix)
 
     def activate(self) -> None:
         if self.state in ("inactive", "deactivating"):
@@ -372,15 +369,12 @@ class ContactState(Activatable):
         return pin.log6(self.reference.actInv(M)).vector
 
     def reference_homogeneous(self, M: pin.SE3) -> np.ndarray:
-        """The reference's homogeneous matrix (kept while the reference is the same
-        object); ``M`` becomes the reference if there is none yet."""
+        """The reference's homogeneous matrix (read at each call: a reference changed in
+        place counts); ``M`` becomes the reference if there is none yet."""
         ref = self.reference
         if ref is None:
             ref = self.reference = pin.SE3(M)
-        cached = self._reference_h
-        if cached is None or cached[0] is not ref:
-            cached = self._reference_h = (ref, ref.homogeneous.copy())
-        return cached[1]
+        return ref.homogeneous
 
     def feedback(self, robot: RobotModel) -> np.ndarray | None:
         """``-kp e - kd nu`` (LOCAL, the contact's dim; :meth:`feedback_terms`) of a
