@@ -111,6 +111,28 @@ def _settle(w, talos):
         w.update(q, v, 0.0, 1e-3)
 
 
+def _assert_feedback_rows(w, talos, seed):
+    """At a random state, the first foot's contact rows (the program's: not a
+    structure's first tick) have Pinocchio's right-hand side ``-Jdot v - kp
+    log6(M_ref^-1 M) - kd nu`` (LOCAL) with its contact state's reference."""
+    st = w.contact_states[FEET[0]]
+    q, v = next(_states(talos, 1, seed))
+    w.robot.update(q, v)
+    w.problem(False)
+    asm = w._assembly
+    m, d = talos.model, w.robot.data
+    fid = m.getFrameId(FEET[0])
+    kp, kd = st.spec.gains
+    rhs = -(
+        pin.getFrameAcceleration(m, d, fid, pin.LOCAL).vector
+        + kp * pin.log6(st.reference.actInv(d.oMf[fid])).vector
+        + kd * pin.getFrameVelocity(m, d, fid, pin.LOCAL).vector
+    )
+    r = sum(c.count(w.robot, w.layout) for c in w.constraints.values())
+    assert np.allclose(asm.lo[r : r + 6], rhs, atol=1e-10)
+    assert np.array_equal(asm.lo[r : r + 6], asm.hi[r : r + 6])
+
+
 @pytest.mark.parametrize("bilateral", [False, True])
 def test_the_program_writes_what_the_python_writers_write(talos, bilateral):
     w = _controller(talos, bilateral)
@@ -174,21 +196,7 @@ def test_the_contact_feedback_matches_pinocchio(talos):
     st.reference = st.reference * pin.SE3(
         pin.rpy.rpyToMatrix(0.02, -0.03, 0.1), np.array([0.01, -0.02, 0.005])
     )
-    q, v = next(_states(talos, 1, 3))
-    w.robot.update(q, v)
-    w.problem(False)
-    asm = w._assembly
-    m, d = talos.model, w.robot.data
-    fid = m.getFrameId(FEET[0])
-    kp, kd = st.spec.gains
-    rhs = -(
-        pin.getFrameAcceleration(m, d, fid, pin.LOCAL).vector
-        + kp * pin.log6(st.reference.actInv(d.oMf[fid])).vector
-        + kd * pin.getFrameVelocity(m, d, fid, pin.LOCAL).vector
-    )
-    r = sum(c.count(w.robot, w.layout) for c in w.constraints.values())
-    assert np.allclose(asm.lo[r : r + 6], rhs, atol=1e-10)
-    assert np.array_equal(asm.lo[r : r + 6], asm.hi[r : r + 6])
+    _assert_feedback_rows(w, talos, 3)
 
 
 def test_log6_against_pinocchio():
@@ -409,17 +417,4 @@ def test_a_reference_moved_in_place_reaches_the_rows(talos):
     _settle(w, talos)
     st = w.contact_states[FEET[0]]
     st.reference.translation[2] += 0.01
-    q, v = next(_states(talos, 1, 13))
-    w.robot.update(q, v)
-    w.problem(False)
-    asm = w._assembly
-    m, d = talos.model, w.robot.data
-    fid = m.getFrameId(FEET[0])
-    kp, kd = st.spec.gains
-    rhs = -(
-        pin.getFrameAcceleration(m, d, fid, pin.LOCAL).vector
-        + kp * pin.log6(st.reference.actInv(d.oMf[fid])).vector
-        + kd * pin.getFrameVelocity(m, d, fid, pin.LOCAL).vector
-    )
-    r = sum(c.count(w.robot, w.layout) for c in w.constraints.values())
-    assert np.allclose(asm.lo[r : r + 6], rhs, atol=1e-10)
+    _assert_feedback_rows(w, talos, 13)

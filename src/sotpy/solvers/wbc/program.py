@@ -55,7 +55,6 @@ __all__ = ["ProblemProgram", "owns", "row_kinds", "unit_columns"]
 Gather = Callable[[list], None]
 
 _LOCAL = pin.LOCAL
-_NO_LOADS = np.zeros(0)  # no solution observed yet: the cost's default loads
 _frame_jacobian = pin.getFrameJacobian
 _frame_acceleration = pin.getFrameAcceleration
 _placement = pin.updateFramePlacement
@@ -273,9 +272,9 @@ class ProblemProgram:
                     g(args)
                 if call.loads >= 0:
                     loads = self.cost.observed(self.layout)
-                    if loads is None and (self.cost._observed is not None or self.cost._loads):
-                        return False  # loads set, or observed over another layout: by key
-                    args[call.loads] = _NO_LOADS if loads is None else loads
+                    if loads is None:
+                        return False  # loads known by contact key: the Python writer
+                    args[call.loads] = loads
                     for s in call.weights:
                         scal[s] = self.cost.weight
                 for i, task, terms, jm, iu, iv, ix in call.tasks:

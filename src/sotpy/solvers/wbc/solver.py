@@ -766,6 +766,7 @@ class _Assembly:
     def __init__(self, key, layout, robot, live, cons, counts, cc, wrench_cost, cost, rate_keep):
         self.key = key
         ncontact = cc.count(robot, layout)
+        plan = cc._planned(layout)  # the contact constraint's blocks, layout order
         n, nv = layout.n, layout.nv
         sizes = [t.size for t, _ in live]
         ncost = sum(2 if c.dim == 3 else 5 for c in cost)
@@ -815,7 +816,7 @@ class _Assembly:
         self._tau = layout.tau
         self._contact_blocks = []
         c0 = r
-        for c, state, nf, ramp, _sl, _st in cc._planned(layout):
+        for c, state, nf, ramp, _sl, _st in plan:
             d = c.dim
             if state == "inactive":  # f_c = 0: rows of the identity
                 self._contact_blocks.append((GENERAL, c0, c0 + d))
@@ -837,14 +838,14 @@ class _Assembly:
         self.live_tasks = [t for t, _w in live]  # the tasks with rows, in order
         self.unit: np.ndarray | None = None  # the rows of the identity (find_units)
         # whether a contact has ramp rows (their bounds change at each tick)
-        self.contact_ramps = any(ramp for _c, _s, _nf, ramp, _sl, _st in cc._planned(layout))
+        self.contact_ramps = any(ramp for _c, _s, _nf, ramp, _sl, _st in plan)
         # the compiled writer of the entries that change with the state (None: the
         # kernels are not compiled) and the live tasks it does not write (by index)
         self.program = None
         self.unfused = list(range(len(live)))
         if _rowkernels.write_problem is not None:
             self.program = ProblemProgram(
-                robot, layout, cc._planned(layout), sum(counts),
+                robot, layout, plan, sum(counts),
                 [(t, r0) for (t, _w), r0 in zip(live, self._task_starts, strict=True)],
                 (wrench_cost, cost, sum(sizes)), (nv, n, m, mc),
             )  # fmt: skip

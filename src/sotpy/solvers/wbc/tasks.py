@@ -41,6 +41,7 @@ from .activation import Activatable, ramp_weight
 from .model import ContactSpec, Layout, RobotModel
 
 _LWA = pin.LOCAL_WORLD_ALIGNED
+_NO_LOADS = np.zeros(0)  # no solution observed yet: the cost's default loads
 
 __all__ = [
     "CartesianAccelerationTask",
@@ -349,10 +350,14 @@ class ContactWrenchCost:
         self._loads = {str(k): float(v) for k, v in loads.items()}
 
     def observed(self, layout: Layout) -> np.ndarray | None:
-        """The wrenches of the last solution observed (layout order), if it was over
-        ``layout`` (the controller's compiled writer reads the loads there)."""
+        """Where the controller's compiled writer reads the loads: the wrenches of the
+        last solution observed over ``layout`` (layout order); an empty array before
+        any (the default loads); None when the loads are known by contact key only
+        (set, or observed over another layout: :meth:`write` reads them)."""
         obs = self._observed
-        return obs[1] if obs is not None and obs[0] is layout else None
+        if obs is not None:
+            return obs[1] if obs[0] is layout else None
+        return None if self._loads else _NO_LOADS
 
     def setWeight(self, weight: float) -> None:
         w = float(weight)
