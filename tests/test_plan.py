@@ -705,3 +705,34 @@ def test_delay_loop_read_after_a_long_gap():
     _, acc = _vector_accumulator(u=(1.0,), x0=(0.0,))
     np.testing.assert_array_equal(acc.out(0), [1.0])
     np.testing.assert_array_equal(acc.out(2_000), [2_001.0])
+
+
+def test_a_plan_whose_sinks_are_up_to_date_computes_nothing_as_a_read_would():
+    # clock (live) -> s (every 3 ticks): at ticks 1 and 2 reading s computes nothing, not
+    # even the live clock; a plan over s does the same, and a second plan over a sink the
+    # first one brought up to date does not walk its steps again
+    def build(prefix):
+        clock = PlanClock(prefix + "clock")
+        s = PlanCopy(prefix + "s")
+        plug(clock.out, s.x)
+        s.y.setPeriod(3)
+        return clock, s
+
+    (pc, ps), (lc, ls) = build("p"), build("l")
+    plan = compilePlan([ps.y])
+    for t in range(7):
+        plan.run(t)
+        assert ps.y._value == ls.y(t)
+    assert pc.ticks == lc.ticks == [0, 3, 6]
+    first, second = compilePlan([ps.y]), compilePlan([ps.y])
+    calls = Counter()
+    seg = second._segments[0][0]
+    second._segments = [
+        (lambda items, t: calls.update([t]) or seg(items, t), second._segments[0][1])
+    ]
+    for t in (9, 10, 11, 12):
+        first.run(t)
+        second.run(t)
+    assert calls == Counter()  # the first plan brought the sink up to date at every tick
+    second.run(15)
+    assert calls == Counter({15: 1})

@@ -51,7 +51,7 @@ class Plan:
     of them would) and advances the clock to ``t``.
     """
 
-    __slots__ = ("_segments", "_sinks", "_version", "steps")
+    __slots__ = ("_holders", "_segments", "_sinks", "_version", "steps")
 
     def __init__(self, sinks: Iterable[Signal]) -> None:
         sinks = tuple(sinks)
@@ -61,6 +61,7 @@ class Plan:
         self._sinks = sinks
         self._version = -1
         self._segments: list[tuple[Callable[[list[Any], int], None], list[Any]]] = []
+        self._holders: tuple[Signal, ...] = ()
         self.steps: list[OutputSignal] = []
 
     @property
@@ -74,6 +75,11 @@ class Plan:
             self.compile()
         if t > pool.time:
             pool.time = t
+        for h in self._holders:
+            if h._checked < t:
+                break
+        else:  # every sink is up to date at t (another plan ran first): reading them
+            return  # would compute nothing, and neither does the plan
         for run_segment, items in self._segments:
             run_segment(items, t)
 
@@ -104,6 +110,7 @@ class Plan:
             else:
                 segments.append((kind, [item]))
         self._segments = segments
+        self._holders = tuple(s._holder() for s in self._sinks)
         self.steps = order
         self._version = pool.version
 
