@@ -97,3 +97,46 @@ def test_page_graph_plot_edit_refusal(tmp_path):
         png = f.read()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     assert struct.unpack(">II", png[16:24]) == (1500, 950)
+
+
+def _descendants(pid: int) -> set[int]:
+    """``pid`` and every process below it (read from /proc)."""
+    import os
+
+    parents: dict[int, int] = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    parents[int(d)] = int(f.read().rsplit(")", 1)[1].split()[1])
+            except OSError:
+                continue
+    out, todo = {pid}, [pid]
+    while todo:
+        p = todo.pop()
+        for child, parent in parents.items():
+            if parent == p and child not in out:
+                out.add(child)
+                todo.append(child)
+    return out
+
+
+def test_a_browser_given_cpus_runs_every_process_there():
+    import os
+
+    from sotpy.dashboard.browser import HeadlessPage
+
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("needs 2 CPUs")
+    robot, _, _, _ = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT, cpus={cpus[-1]})
+    with Dashboard(loop) as ui, HeadlessPage(ui.url(), 800, 600, cpus=loop.otherCpus()) as page:
+        page.waitFor("document.querySelectorAll('#graph .node').length >= 6")
+        procs = _descendants(page._proc.pid)
+        assert len(procs) >= 3  # the browser, its renderer, its helpers
+        for pid in procs:
+            try:
+                assert os.sched_getaffinity(pid) == set(cpus[:-1]), pid
+            except ProcessLookupError:
+                continue  # a helper that ended meanwhile

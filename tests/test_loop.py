@@ -504,3 +504,44 @@ def test_stop_is_idempotent_and_threads_end():
     loop.stop()
     loop.stop()
     assert not any(t.name == "ControlLoop(loop)" and t.is_alive() for t in threading.enumerate())
+
+
+# -- CPUs ---------------------------------------------------------------------------------
+def test_the_loop_thread_runs_on_its_cpus_and_the_caller_keeps_its_own():
+    import os
+
+    allowed = sorted(os.sched_getaffinity(0))
+    dev = _light()
+    loop = ControlLoop("loop", dev, 0.001, cpus={allowed[-1]})
+    assert loop.cpus == frozenset({allowed[-1]})
+    seen: list[set[int]] = []
+
+    class Probe(Entity):
+        @Output(VECTOR, withTime=True, timeDependent=True)
+        def sout(self, t):
+            seen.append(os.sched_getaffinity(0))
+            return np.zeros(1)
+
+    probe = Probe("probe")
+    plug(probe.sout, dev.control)
+    loop.start(5)
+    assert loop.wait(5.0)
+    assert seen and all(s == {allowed[-1]} for s in seen)
+    loop.step(1)  # in this thread: its CPUs are left as they were
+    assert seen[-1] == set(allowed)
+    assert os.sched_getaffinity(0) == set(allowed)
+    expected = frozenset(allowed[:-1]) or None
+    assert loop.otherCpus() == expected
+
+
+@pytest.mark.parametrize(
+    ("cpus", "why"),
+    [([], "non-empty"), ("0", "non-empty set of CPU numbers"), ([True], "CPU numbers"),
+     ([0.5], "CPU numbers"), (7, "CPU numbers"), ([10**6], "not among the CPUs")],
+)  # fmt: skip
+def test_cpus_that_cannot_be_used_are_refused_by_name(cpus, why):
+    dev = _light()
+    with pytest.raises(LoopError, match=why) as info:
+        ControlLoop("pinned", dev, 0.001, cpus=cpus)
+    assert "ControlLoop(pinned): cpus" in str(info.value)
+    assert not pool.hasEntity("pinned")

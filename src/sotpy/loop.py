@@ -88,6 +88,20 @@ each, and once a pass of the oldest one of 74 ms; frozen, the passes take 13 to 
 ``step`` (as fast as possible, often one tick at a time from a shell) leaves the
 collector as it is.
 
+CPUs
+----
+``ControlLoop(..., cpus={3})`` runs the background thread on those CPUs only (Linux's
+``sched_setaffinity``; the calling thread of ``step``/``run`` is left as it is). On a
+machine where other programs run beside the loop (a browser showing the dashboard, a
+viewer, a compiler), their work on the loop's CPU evicts the tick's data from the
+CPU's caches while the loop sleeps between ticks, and the next tick runs slower: on a
+2-core machine, headless Chromium drawing the dashboard's plots made the Talos reach
+loop's median tick 1.44 times longer when it shared the CPUs, and 1.04 times when the
+loop had a CPU of its own (``BENCHMARKS.md``, "Dashboard"). :meth:`ControlLoop.otherCpus`
+names the CPUs left to the rest: the dashboard's threads and the browser it starts run
+there. For a robot, isolate the loop's CPU from the scheduler as well (the kernel's
+``isolcpus``), so that no other program is put on it.
+
 Shutdown
 --------
 The loop is an entity: ``pool.remove(loop)`` or ``pool.clear()`` stops its thread
@@ -106,10 +120,11 @@ import gc
 import logging
 import math
 import numbers
+import os
 import threading
 import time
 import traceback
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -317,6 +332,29 @@ def unlocked() -> Iterator[None]:
         lock._acquire_restore(saved)  # type: ignore[attr-defined]
 
 
+def _checkedCpus(who: str, cpus: Iterable[int] | None) -> frozenset[int] | None:
+    """``cpus`` as a set of CPU numbers this process may run on, or None."""
+    if cpus is None:
+        return None
+    if not hasattr(os, "sched_setaffinity"):
+        raise LoopError(f"{who}: cpus: this platform cannot pin a thread to CPUs")
+    try:
+        wanted = list(cpus)
+    except TypeError:
+        raise LoopError(f"{who}: cpus must be CPU numbers (integers), got {cpus!r}") from None
+    if not wanted or not all(isinstance(c, numbers.Integral) and not isinstance(c, bool)
+                             for c in wanted):  # fmt: skip
+        raise LoopError(f"{who}: cpus must be a non-empty set of CPU numbers, got {cpus!r}")
+    allowed = os.sched_getaffinity(0)
+    out = frozenset(int(c) for c in wanted)
+    if not out <= allowed:
+        raise LoopError(
+            f"{who}: cpus {sorted(out - allowed)} are not among the CPUs this process may "
+            f"use ({sorted(allowed)})"
+        )
+    return out
+
+
 def _isReal(x: Any) -> bool:
     return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
@@ -347,7 +385,8 @@ class ControlLoop(Entity):
     ``device`` an entity with ``increment(dt)`` (a :class:`~sotpy.dynamics.Device`),
     ``dt`` the period in s (the device's time step and the real-time period), ``spin``
     the time in s spent yielding before each deadline instead of sleeping, ``window``
-    the number of recent ticks the means and p99 are computed over.
+    the number of recent ticks the means and p99 are computed over, ``cpus`` the CPUs
+    the background thread runs on (None: wherever the OS puts it; see the module doc).
     """
 
     def __init__(
@@ -357,6 +396,7 @@ class ControlLoop(Entity):
         dt: float = 1e-3,
         spin: float = DEFAULT_SPIN,
         window: int = DEFAULT_WINDOW,
+        cpus: Iterable[int] | None = None,
     ) -> None:
         who = f"{self.className}({name})"
         if not callable(getattr(device, "increment", None)):
@@ -366,6 +406,7 @@ class ControlLoop(Entity):
             raise LoopError(f"{who}: spin must be a finite number of s >= 0, got {spin!r}")
         if isinstance(window, bool) or not isinstance(window, int) or window < 1:
             raise LoopError(f"{who}: window must be an integer >= 1, got {window!r}")
+        self._cpus = _checkedCpus(who, cpus)
         self._device = device
         self._dt = float(dt)
         self._spin_ns = int(spin * 1e9)
@@ -389,6 +430,20 @@ class ControlLoop(Entity):
     def dt(self) -> float:
         """The period, in s."""
         return self._dt
+
+    @property
+    def cpus(self) -> frozenset[int] | None:
+        """The CPUs the background thread runs on (None: not pinned)."""
+        return self._cpus
+
+    def otherCpus(self) -> frozenset[int] | None:
+        """The CPUs this process may use that are not the loop's: where the threads and
+        programs that serve the loop (the dashboard's server, a browser) should run.
+        None when the loop is not pinned or when it has every CPU."""
+        if self._cpus is None:
+            return None
+        rest = frozenset(os.sched_getaffinity(0)) - self._cpus
+        return rest or None
 
     @property
     def fault(self) -> LoopFault | None:
@@ -577,6 +632,8 @@ class ControlLoop(Entity):
         raise SotpyError(f"{self._who(cmd)}: {self._fault}") from failure
 
     def _threadMain(self, ticks: int | None) -> None:
+        if self._cpus is not None:
+            os.sched_setaffinity(0, self._cpus)  # this thread only (Linux)
         try:
             self._loop(ticks, True)  # a failure is recorded as the fault and logged
         except BaseException:  # pragma: no cover - _loop catches everything a tick raises

@@ -39,7 +39,7 @@ import code
 import re
 import rlcompleter
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -177,13 +177,16 @@ def ipythonMatcher(namespace: Mapping[str, Any]) -> Any:
     return sotpy_names
 
 
-def makeNamespace(robot: str | None = "talos", dt: float = 1e-3) -> dict[str, Any]:
+def makeNamespace(
+    robot: str | None = "talos", dt: float = 1e-3, cpus: Iterable[int] | None = None
+) -> dict[str, Any]:
     """The namespace of the shell and of the remote interpreter.
 
     Args:
         robot: a shipped robot's name (``sotpy robots``) or a description path; None:
             no robot, no loop (the helpers raise until ``loop`` is set).
         dt: the loop's period and the device's time step, in s.
+        cpus: the CPUs the loop's thread runs on (``ControlLoop(..., cpus=)``), or None.
     """
     ns: dict[str, Any] = {"__name__": "__main__", "np": np, "pool": pool, "plug": plug}
     ns["unlocked"] = unlocked
@@ -194,7 +197,7 @@ def makeNamespace(robot: str | None = "talos", dt: float = 1e-3) -> dict[str, An
         r = load_robot(robot)
         r.device.setControlType("velocity")
         r.device.control.value = np.zeros(r.model.nv)
-        loop = ControlLoop("loop", r.device, dt)
+        loop = ControlLoop("loop", r.device, dt, cpus=cpus)
         ns["robot"] = r
     for e in pool.entities():
         if e.name.isidentifier():

@@ -19,6 +19,7 @@ from __future__ import annotations
 import base64
 import contextlib
 import fcntl
+import numbers
 import os
 import shutil
 import subprocess
@@ -37,9 +38,30 @@ __all__ = ["HeadlessPage"]
 class HeadlessPage:
     """A headless Chromium showing ``url`` (``width`` x ``height`` pixels) until
     :meth:`close`. Every call raises :class:`~sotpy.errors.SotpyError` after
-    ``timeout`` s in all (from the start)."""
+    ``timeout`` s in all (from the start). ``cpus``: the CPUs Chromium and all its
+    processes run on (None: any), e.g. a pinned loop's :meth:`~sotpy.loop.ControlLoop.otherCpus`
+    so that the browser keeps off the loop's CPU."""
 
-    def __init__(self, url: str, width: int = 1600, height: int = 1000, timeout: float = 120.0):
+    def __init__(
+        self,
+        url: str,
+        width: int = 1600,
+        height: int = 1000,
+        timeout: float = 120.0,
+        cpus: frozenset[int] | set[int] | None = None,
+    ):
+        if cpus is not None and not (
+            cpus and all(isinstance(c, numbers.Integral) and not isinstance(c, bool) for c in cpus)
+        ):
+            raise SotpyError(
+                f"HeadlessPage: cpus must be a non-empty set of CPU numbers, got {cpus!r}"
+            )
+        # the CPUs are set before Chromium starts: every process it starts inherits them
+        pin = (
+            ""
+            if cpus is None
+            else f"import os; os.sched_setaffinity(0, {sorted(map(int, cpus))}); "
+        )
         exe = findChromium()
         if exe is None:
             raise SotpyError(
@@ -65,7 +87,15 @@ class HeadlessPage:
         self._proc: subprocess.Popen[bytes] | None = None
         try:
             self._proc = subprocess.Popen(
-                [sys.executable, "-c", _TRAMPOLINE, str(child_in), str(child_out), exe, *args],
+                [
+                    sys.executable,
+                    "-c",
+                    pin + _TRAMPOLINE,
+                    str(child_in),
+                    str(child_out),
+                    exe,
+                    *args,
+                ],
                 stdin=subprocess.DEVNULL,
                 stdout=self._stderr,
                 stderr=self._stderr,

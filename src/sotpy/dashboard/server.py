@@ -23,6 +23,11 @@ page in the same browser cannot open it). The server listens on 127.0.0.1; anoth
 address needs ``allowRemote=True`` and is warned about (the page is plain HTTP: the
 token crosses the network unencrypted; prefer ``ssh -L``).
 
+**CPUs.** When the loop is pinned (``ControlLoop(..., cpus=...)``), the server's threads
+run on the CPUs it leaves (``Dashboard.cpus``), and so does a browser started with
+:class:`~sotpy.dashboard.browser.HeadlessPage` given those CPUs: their work then does
+not evict the tick's data from the loop's CPU while it sleeps between ticks.
+
 **The loop never waits for the page.** The plotted signals are recorded in the tick by
 the :class:`~sotpy.dashboard.model.Recorder` (a few us a signal); the server reads the
 new rows without a lock and sends each page at most ``rate`` frames a second; while a
@@ -42,6 +47,7 @@ import ipaddress
 import json
 import logging
 import math
+import os
 import secrets
 import socket
 import struct
@@ -174,7 +180,11 @@ class Dashboard:
         self._graphPending = False
         self._stats: Any = None
         self._statsAt = 0.0
-        self._work = ThreadPoolExecutor(1, thread_name_prefix=f"{who} edits")
+        others = loop.otherCpus() if callable(getattr(loop, "otherCpus", None)) else None
+        self.cpus: frozenset[int] | None = others
+        self._work = ThreadPoolExecutor(
+            1, thread_name_prefix=f"{who} edits", initializer=self._keepOffTheLoop
+        )
         self._graphLock = threading.Lock()
         self._ready = threading.Event()
         self._error: BaseException | None = None
@@ -341,8 +351,14 @@ class Dashboard:
             aio.call_soon_threadsafe(send)
 
     # -- the server thread ---------------------------------------------------------------
+    def _keepOffTheLoop(self) -> None:
+        """Run the calling thread on the CPUs the loop leaves (when it is pinned)."""
+        if self.cpus is not None:
+            os.sched_setaffinity(0, self.cpus)
+
     def _serve(self) -> None:
         try:
+            self._keepOffTheLoop()
             aio = asyncio.new_event_loop()
             asyncio.set_event_loop(aio)
             self._aio = aio

@@ -167,6 +167,20 @@ def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
         help="allow --ui-host to be an address other than loopback (the page is then "
         "reachable from the network, over plain HTTP: a warning says so)",
     )
+    g.add_argument(
+        "--loop-cpu",
+        type=int,
+        action="append",
+        metavar="N",
+        help="run the control loop's thread on CPU N (repeat for several) and the "
+        "dashboard's threads on the others, so that they do not slow its ticks",
+    )
+
+
+def loop_cpus(args: argparse.Namespace) -> set[int] | None:
+    """The CPUs ``--loop-cpu`` asks the control loop to run on (None: not pinned)."""
+    cpus = getattr(args, "loop_cpu", None)
+    return set(cpus) if cpus else None
 
 
 def open_dashboard(
@@ -203,11 +217,18 @@ def _demo_ui(args: argparse.Namespace, name: str, build: Callable[[], dict[str, 
         device = pool.getEntity(f"{result['prefix']}_device")
         model, visual, _ = load_model(args.robot)
         robot = types.SimpleNamespace(model=model, visual_model=visual)
-        loop = ControlLoop(f"{result['prefix']}_loop", device, args.dt)
+        loop = ControlLoop(f"{result['prefix']}_loop", device, args.dt, cpus=loop_cpus(args))
         ui = open_dashboard(loop, robot, args)
     except SotpyError as exc:
         print(f"sotpy demo {name}: {exc}", file=sys.stderr)
         return 1
+    if loop.cpus is not None:
+        rest = loop.otherCpus()
+        print(
+            f"sotpy demo {name}: the loop's thread runs on CPU {sorted(loop.cpus)}, the "
+            f"dashboard's on {'any' if rest is None else sorted(rest)}",
+            flush=True,
+        )
     print(
         f"sotpy demo {name}: the graph is built and the loop {loop.name} paused at tick "
         f"{device.state.time}; open the dashboard:\n  {ui.url()}\nStart the loop there (or "
