@@ -18,6 +18,7 @@ from sotpy.dashboard import Dashboard, applyEdit, graphSnapshot, isLoopback, sta
 from sotpy.dashboard.model import EditError, signalList
 from sotpy.dynamics import load_robot
 from sotpy.errors import SignalTypeError, SotpyError
+from sotpy.graph import VECTOR as VECTOR_T
 from sotpy.graph import Tracer, plug, pool
 from sotpy.loop import ControlLoop
 from sotpy.solvers import SOT
@@ -422,11 +423,85 @@ def test_sotpy_demo_ui_builds_the_graph_and_serves_it():
     import sys
 
     env = {**os.environ, "SOTPY_JIT": os.environ.get("SOTPY_JIT", "0")}
+    last = max(os.sched_getaffinity(0))
     out = subprocess.run(
-        [sys.executable, "-m", "sotpy", "demo", "nao", "--ui", "--hold", "0.5"],
+        [sys.executable, "-m", "sotpy", "demo", "nao", "--ui", "--hold", "0.5",
+         "--loop-cpu", str(last)],
         capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
+    assert f"the loop's thread runs on CPU [{last}]" in out.stdout
     assert "paused at tick 1" in out.stdout
     assert "http://127.0.0.1:" in out.stdout and "?token=" in out.stdout
     assert "stopped; loop statistics" in out.stdout
+    bad = subprocess.run(
+        [sys.executable, "-m", "sotpy", "demo", "nao", "--ui", "--hold", "0.5",
+         "--loop-cpu", "100000"],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert bad.returncode == 1
+    assert "cpus [100000] are not among the CPUs this process may use" in bad.stderr
+
+
+def test_recorder_follows_a_replug_and_converts_what_is_not_a_plain_vector():
+    """The recorder reads an up-to-date value where it is held (a plugged input's source)
+    and finds that holder again when a plug changes; a type whose numeric form is not its
+    value flattened goes through the type's ``to_array``."""
+    from sotpy.graph import Entity, Input, Output, SignalType
+
+    halves = SignalType("halves", lambda v: np.asarray(v, dtype=float), lambda v: 0.5 * v)
+
+    class RecSource(Entity):
+        def __init__(self, name, k):
+            self.k = k
+
+        @Output(VECTOR_T, withTime=True, timeDependent=True)
+        def out(self, t):
+            return np.array([self.k, float(t)])
+
+        @Output(halves, withTime=True, timeDependent=True)
+        def half(self, t):
+            return np.array([self.k, 2.0 * t])
+
+    class RecSink(Entity):
+        inp = Input(VECTOR_T)
+
+    robot, _, _, _ = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT)
+    a, b, sink = RecSource("rec_a", 1.0), RecSource("rec_b", 2.0), RecSink("rec_sink")
+    plug(a.out, sink.inp)
+    with Dashboard(loop, seconds=1.0) as ui:
+        ui.plot(sink.inp.path, a.half.path, a.out.path)  # a.out stays up to date
+        loop.step(3)
+        with pool.lock:
+            plug(b.out, sink.inp)
+        loop.step(3)
+        data = ui.data()
+        ticks = data["tick"]
+        got = data[sink.inp.path]
+        np.testing.assert_array_equal(got[:, 1], ticks)
+        np.testing.assert_array_equal(got[:, 0], [1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+        np.testing.assert_array_equal(data[a.half.path], np.c_[np.full(6, 0.5), ticks])
+
+
+def test_a_pinned_loop_keeps_the_dashboards_threads_off_its_cpu():
+    import os
+    import threading
+
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("needs 2 CPUs")
+    robot, _, _, _ = ur5_reach()
+    loop = ControlLoop("loop", robot.device, DT, cpus={cpus[-1]})
+    assert loop.otherCpus() == frozenset(cpus[:-1])
+    with Dashboard(loop, seconds=1.0) as ui:
+        assert ui.cpus == frozenset(cpus[:-1])
+        ui._work.submit(lambda: None).result(10)  # the edits' worker thread exists
+        mine = [t for t in threading.enumerate() if t.name.startswith("Dashboard(dashboard)")]
+        assert len(mine) >= 2  # the server and the edits' worker
+        for t in mine:
+            assert os.sched_getaffinity(t.native_id) == set(cpus[:-1]), t.name
+    unpinned = ControlLoop("loop2", robot.device, DT)
+    assert unpinned.otherCpus() is None
+    with Dashboard(unpinned, seconds=1.0) as ui:
+        assert ui.cpus is None
