@@ -18,6 +18,12 @@ run alternates two phases of ``--seconds`` each, ``--rounds`` times, in one proc
   another process that renders nothing (the page's traffic without the browser's CPU):
   the dashboard's own cost in the loop's process.
 
+The loop runs on a CPU of its own (``ControlLoop(..., cpus={N})``, by default the last
+CPU, ``--loop-cpu``), and everything else off it: the dashboard's threads (its
+``cpus``), Chromium (``HeadlessPage(..., cpus=loop.otherCpus())``) and this script's
+other processes. That is how a 1 kHz loop is run beside a browser on one machine;
+``--no-pin`` lets the OS place everything, as before 2026-12-04.
+
 Reported: the tick time (``device.increment``, which includes the dashboard's recorder:
 it runs in the tick) median and p99 of each phase, pooled over the rounds, and their
 ratios with over without; the frames the page received per second and those skipped.
@@ -159,7 +165,7 @@ def _elsewhere(loop, seconds: float) -> np.ndarray:
     )  # fmt: skip
     try:
         url = proc.stdout.readline().strip()
-        with HeadlessPage(url, 1600, 1000) as page:
+        with HeadlessPage(url, 1600, 1000, cpus=loop.otherCpus()) as page:
             page.waitFor("document.querySelectorAll('#graph .node').length > 0", 60)
             for k in range(5):
                 comps = [k % 4, k % 4 + 1, k % 4 + 2]
@@ -180,6 +186,10 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each phase, s")
     ap.add_argument("--rounds", type=int, default=3, help="phases of each kind")
     ap.add_argument("--quick", action="store_true", help="1 round of 2 s")
+    ap.add_argument(
+        "--loop-cpu", type=int, default=None, help="the loop's CPU (default: the last one)"
+    )
+    ap.add_argument("--no-pin", action="store_true", help="let the OS place every thread")
     args = ap.parse_args()
     if args.quick:
         args.seconds, args.rounds = 2.0, 1
@@ -192,7 +202,16 @@ def main() -> int:
     result = run_reach("talos", duration=0.001, dt=0.001, quiet=True)
     p = result["prefix"]
     device = pool.getEntity(f"{p}_device")
-    loop = ControlLoop("bench_loop", device, 0.001)
+    cpus = sorted(os.sched_getaffinity(0))
+    pin = not args.no_pin and len(cpus) > 1
+    mine = {args.loop_cpu if args.loop_cpu is not None else cpus[-1]} if pin else None
+    loop = ControlLoop("bench_loop", device, 0.001, cpus=mine)
+    others = loop.otherCpus()
+    if others is not None:  # this thread, and the processes it starts: off the loop's CPU
+        os.sched_setaffinity(0, others)
+    placement = f"the loop on CPU {sorted(mine)}, the rest on {sorted(others)}" if pin else (
+        "not pinned: the OS places every thread"
+    )  # fmt: skip
     loop.step(200)  # warm: plans compiled, caches filled
     without, with_, frames, elsewhere, client, rates = [], [], [], [], [], []
     for r in range(args.rounds):
@@ -203,7 +222,7 @@ def main() -> int:
         without.append(_phase(loop, args.seconds))
         ui = Dashboard(loop, seconds=5.0)
         try:
-            with HeadlessPage(ui.url(), 1600, 1000) as page:
+            with HeadlessPage(ui.url(), 1600, 1000, cpus=loop.otherCpus()) as page:
                 page.waitFor("document.querySelectorAll('#graph .node').length > 0", 60)
                 for sig, comps in PLOTS:
                     path = sig.format(p=p)
@@ -234,7 +253,7 @@ def main() -> int:
     print(machine_line(f"numpy {np.__version__}"))
     print(
         f"Talos reach loop at 1 kHz, {args.rounds} x {args.seconds:g} s per phase, "
-        f"{len(a)} ticks without the page, {len(b)} with it"
+        f"{len(a)} ticks without the page, {len(b)} with it; {placement}"
     )
     print(f"{'':28s} {'median':>10s} {'p99':>10s}")
     print(f"{'without the dashboard':28s} {med_a * 1e6:8.1f}us {p99_a * 1e6:8.1f}us")

@@ -91,16 +91,16 @@ collector as it is.
 CPUs
 ----
 ``ControlLoop(..., cpus={3})`` runs the background thread on those CPUs only (Linux's
-``sched_setaffinity``; the calling thread of ``step``/``run`` is left as it is). On a
-machine where other programs run beside the loop (a browser showing the dashboard, a
-viewer, a compiler), their work on the loop's CPU evicts the tick's data from the
-CPU's caches while the loop sleeps between ticks, and the next tick runs slower: on a
-2-core machine, headless Chromium drawing the dashboard's plots made the Talos reach
-loop's median tick 1.44 times longer when it shared the CPUs, and 1.04 times when the
-loop had a CPU of its own (``BENCHMARKS.md``, "Dashboard"). :meth:`ControlLoop.otherCpus`
-names the CPUs left to the rest: the dashboard's threads and the browser it starts run
-there. For a robot, isolate the loop's CPU from the scheduler as well (the kernel's
-``isolcpus``), so that no other program is put on it.
+``sched_setaffinity``; the calling thread of ``step``/``run`` is left as it is). Other
+programs running beside the loop (a browser showing the dashboard, a viewer, a compiler)
+slow its ticks when the OS puts them on the loop's CPU: they take the CPU during a tick
+and evict the tick's data from its caches between two. On a 2-core machine, headless
+Chromium drawing the dashboard's plots made the Talos reach loop's median tick 1.44 to
+1.49 times longer when it could run anywhere, 1.00 to 1.02 times when the loop had a CPU
+of its own (``BENCHMARKS.md``, "Dashboard"). :meth:`ControlLoop.otherCpus` names the
+CPUs left to the rest: the dashboard's threads and the browser it starts run there. For
+a robot, isolate the loop's CPU from the scheduler as well (the kernel's ``isolcpus``),
+so that no other program is put on it.
 
 Shutdown
 --------
