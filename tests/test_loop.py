@@ -537,7 +537,8 @@ def test_the_loop_thread_runs_on_its_cpus_and_the_caller_keeps_its_own():
 @pytest.mark.parametrize(
     ("cpus", "why"),
     [([], "non-empty"), ("0", "non-empty set of CPU numbers"), ([True], "CPU numbers"),
-     ([0.5], "CPU numbers"), (7, "CPU numbers"), ([10**6], "not among the CPUs")],
+     ([0.5], "CPU numbers"), (7, "CPU numbers"), ([10**6], "not CPUs of this machine"),
+     ([-1], "not CPUs of this machine")],
 )  # fmt: skip
 def test_cpus_that_cannot_be_used_are_refused_by_name(cpus, why):
     dev = _light()
@@ -545,3 +546,48 @@ def test_cpus_that_cannot_be_used_are_refused_by_name(cpus, why):
         ControlLoop("pinned", dev, 0.001, cpus=cpus)
     assert "ControlLoop(pinned): cpus" in str(info.value)
     assert not pool.hasEntity("pinned")
+
+
+def test_a_cpu_the_process_may_not_use_is_refused_when_the_loop_starts(monkeypatch):
+    import errno
+    import os
+
+    dev = _light()
+    loop = ControlLoop("loop", dev, 0.001, cpus={0})
+    real = os.sched_setaffinity
+
+    def refuse(pid, cpus):
+        raise OSError(errno.EINVAL, "Invalid argument")
+
+    monkeypatch.setattr(os, "sched_setaffinity", refuse)
+    with pytest.raises(LoopError, match=r"ControlLoop\(loop\)\.start: cannot run on cpus \[0\]"):
+        loop.start()
+    assert not loop.running and loop.ticks == 0
+    monkeypatch.setattr(os, "sched_setaffinity", real)
+    loop.start(3)  # the same loop starts once its CPUs can be taken
+    assert loop.wait(5.0) and loop.ticks == 3
+
+
+@pytest.mark.parametrize("spin", [0.0, 0.01])
+def test_a_spin_of_the_whole_period_never_sleeps_and_keeps_the_rate(spin):
+    """With ``spin >= dt`` the thread yields for the whole period instead of sleeping:
+    it keeps the rate, stops when asked, and takes its CPU's time; sleeping takes none."""
+    import os
+
+    dev = _light()
+    loop = ControlLoop("loop", dev, 0.01, spin=spin, cpus={max(os.sched_getaffinity(0))})
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    loop.start(ticks=31)
+    assert loop.wait(5.0)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - t0
+    s = loop.stats()
+    assert s.ticks == 31 and 90.0 <= s.rate <= 110.0 and s.fault is None
+    if spin:
+        assert cpu > 0.5 * wall, (cpu, wall)  # busy for the whole run
+    else:
+        assert cpu < 0.3 * wall, (cpu, wall)  # asleep between ticks
+    loop.start()  # until stopped: a stop request ends a spinning thread at once
+    time.sleep(0.05)
+    t1 = time.perf_counter()
+    loop.stop()
+    assert time.perf_counter() - t1 < 0.1 and not loop.running

@@ -26,8 +26,19 @@ Pacing
 Tick ``k`` of a run is due at the absolute deadline ``t0 + k dt`` (``t0`` the start,
 ``time.perf_counter_ns``), never ``previous end + dt``, so the rate does not drift.
 The thread waits for a deadline with ``Event.wait`` until ``spin`` seconds before it
-(default 200 us) and then yields (``time.sleep(0)``, which releases the GIL) until the
-deadline: sleeping alone wakes 50-100 us late on Linux.
+(default 200 us) and then yields (``os.sched_yield``, which releases the GIL and lets
+another thread of the CPU run, but does not let the CPU idle) until the deadline:
+sleeping alone wakes 50-100 us late on Linux.
+
+**A CPU that never idles.** While the loop sleeps its CPU idles, and the next tick starts
+with cold caches (on a virtual machine the host runs something else on the core; on
+bare metal the core may enter a deep sleep state that flushes them). With ``spin=dt``
+(or more) the thread never sleeps: it yields for the whole period, and each tick runs as
+nearly as fast as back-to-back ticks do. Measured on the Talos reach loop (2-core
+virtual machine, the loop on a CPU of its own; ``BENCHMARKS.md``, "Control loop: a CPU
+that never idles"): median tick 129 to 103 us (94 back to back), p99 286-345 to 211-297
+us, deadline misses 11-16 to 4 in 12 s. The price is a whole CPU: give the loop one of
+its own (``cpus=``); on a robot, isolate it (``isolcpus``) as real-time setups do.
 
 What is measured (:meth:`ControlLoop.stats`, a :class:`LoopStats`):
 
@@ -333,7 +344,8 @@ def unlocked() -> Iterator[None]:
 
 
 def _checkedCpus(who: str, cpus: Iterable[int] | None) -> frozenset[int] | None:
-    """``cpus`` as a set of CPU numbers this process may run on, or None."""
+    """``cpus`` as a set of CPU numbers of this machine, or None. Whether the process may
+    run there (a container's cpuset) is known when the thread starts (``start``)."""
     if cpus is None:
         return None
     if not hasattr(os, "sched_setaffinity"):
@@ -345,14 +357,22 @@ def _checkedCpus(who: str, cpus: Iterable[int] | None) -> frozenset[int] | None:
     if not wanted or not all(isinstance(c, numbers.Integral) and not isinstance(c, bool)
                              for c in wanted):  # fmt: skip
         raise LoopError(f"{who}: cpus must be a non-empty set of CPU numbers, got {cpus!r}")
-    allowed = os.sched_getaffinity(0)
     out = frozenset(int(c) for c in wanted)
-    if not out <= allowed:
+    count = os.cpu_count() or 1
+    if not all(0 <= c < count for c in out):
         raise LoopError(
-            f"{who}: cpus {sorted(out - allowed)} are not among the CPUs this process may "
-            f"use ({sorted(allowed)})"
+            f"{who}: cpus {sorted(c for c in out if not 0 <= c < count)} are not CPUs of "
+            f"this machine (0 to {count - 1})"
         )
     return out
+
+
+def _sleep_zero() -> None:
+    time.sleep(0)
+
+
+#: Yield the CPU to another thread without letting it idle (releases the GIL).
+_YIELD_CPU = getattr(os, "sched_yield", _sleep_zero)
 
 
 def _isReal(x: Any) -> bool:
@@ -418,6 +438,7 @@ class ControlLoop(Entity):
         self._unplugged: Any = None  # (source or None, constant) before the safe stop
         self._lastTorque: np.ndarray | None = None
         self._realtime = False
+        self._pinError: OSError | None = None  # why the thread could not take its CPUs
         self.resetStats()
 
     # -- properties ------------------------------------------------------------------
@@ -437,8 +458,8 @@ class ControlLoop(Entity):
         return self._cpus
 
     def otherCpus(self) -> frozenset[int] | None:
-        """The CPUs this process may use that are not the loop's: where the threads and
-        programs that serve the loop (the dashboard's server, a browser) should run.
+        """The CPUs the calling thread may use that are not the loop's: where the threads
+        and programs that serve the loop (the dashboard's server, a browser) should run.
         None when the loop is not pinned or when it has every CPU."""
         if self._cpus is None:
             return None
@@ -476,13 +497,24 @@ class ControlLoop(Entity):
             self.resetStats()
             self._stopEvent.clear()
             self._realtime = True
+            pinned = threading.Event()
+            self._pinError = None
             self._thread = threading.Thread(
                 target=self._threadMain,
-                args=(ticks,),
+                args=(ticks, pinned),
                 name=f"{self.className}({self.name})",
                 daemon=True,
             )
             self._thread.start()
+            pinned.wait()  # the thread's first act: set its CPUs (or fail to)
+            if self._pinError is not None:
+                self._thread.join()
+                self._thread = None
+                raise LoopError(
+                    f"{self._who('start')}: cannot run on cpus {sorted(self._cpus or ())}: "
+                    f"{self._pinError.strerror or self._pinError} (this process may use "
+                    f"{sorted(os.sched_getaffinity(0))})"
+                )
 
     @command
     def stop(self, timeout: float = 5.0) -> None:
@@ -631,9 +663,15 @@ class ControlLoop(Entity):
             raise failure  # Ctrl-C, SystemExit: after the safe stop, as the caller expects
         raise SotpyError(f"{self._who(cmd)}: {self._fault}") from failure
 
-    def _threadMain(self, ticks: int | None) -> None:
-        if self._cpus is not None:
-            os.sched_setaffinity(0, self._cpus)  # this thread only (Linux)
+    def _threadMain(self, ticks: int | None, pinned: threading.Event) -> None:
+        try:
+            if self._cpus is not None:
+                os.sched_setaffinity(0, self._cpus)  # this thread only (Linux)
+        except OSError as exc:  # a CPU outside the process's cpuset: start() says so
+            self._pinError = exc
+            return
+        finally:
+            pinned.set()
         try:
             self._loop(ticks, True)  # a failure is recorded as the fault and logged
         except BaseException:  # pragma: no cover - _loop catches everything a tick raises
@@ -653,6 +691,7 @@ class ControlLoop(Entity):
         dt = self._dt
         period = self._period_ns
         spin = self._spin_ns
+        yield_cpu = _YIELD_CPU
         torque = self._device.getControlType() == "torque" if self._hasControlType() else False
         version = -1
         deadline = clock()
@@ -663,7 +702,7 @@ class ControlLoop(Entity):
                 if now < deadline - spin and stop.wait((deadline - spin - now) * 1e-9):
                     return None
                 while clock() < deadline:
-                    time.sleep(0)
+                    yield_cpu()
             if stop.is_set():
                 return None
             locked = False
