@@ -190,6 +190,11 @@ def main() -> int:
         "--loop-cpu", type=int, default=None, help="the loop's CPU (default: the last one)"
     )
     ap.add_argument("--no-pin", action="store_true", help="let the OS place every thread")
+    ap.add_argument(
+        "--never-idle",
+        action="store_true",
+        help="the loop spins through the whole period (spin = dt): its CPU never idles",
+    )
     args = ap.parse_args()
     if args.quick:
         args.seconds, args.rounds = 2.0, 1
@@ -205,13 +210,16 @@ def main() -> int:
     cpus = sorted(os.sched_getaffinity(0))
     pin = not args.no_pin and len(cpus) > 1
     mine = {args.loop_cpu if args.loop_cpu is not None else cpus[-1]} if pin else None
-    loop = ControlLoop("bench_loop", device, 0.001, cpus=mine)
+    spin = {"spin": 0.001} if args.never_idle else {}
+    loop = ControlLoop("bench_loop", device, 0.001, cpus=mine, **spin)
     others = loop.otherCpus()
     if others is not None:  # this thread, and the processes it starts: off the loop's CPU
         os.sched_setaffinity(0, others)
     placement = f"the loop on CPU {sorted(mine)}, the rest on {sorted(others)}" if pin else (
         "not pinned: the OS places every thread"
     )  # fmt: skip
+    if args.never_idle:
+        placement += "; the loop never idles (spin = dt)"
     loop.step(200)  # warm: plans compiled, caches filled
     without, with_, frames, elsewhere, client, rates = [], [], [], [], [], []
     for r in range(args.rounds):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import struct
 import time
 import urllib.error
 import urllib.request
@@ -440,7 +441,7 @@ def test_sotpy_demo_ui_builds_the_graph_and_serves_it():
         capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert bad.returncode == 1
-    assert "cpus [100000] are not among the CPUs this process may use" in bad.stderr
+    assert "cpus [100000] are not CPUs of this machine" in bad.stderr
 
 
 def test_recorder_follows_a_replug_and_converts_what_is_not_a_plain_vector():
@@ -505,3 +506,62 @@ def test_a_pinned_loop_keeps_the_dashboards_threads_off_its_cpu():
     assert unpinned.otherCpus() is None
     with Dashboard(unpinned, seconds=1.0) as ui:
         assert ui.cpus is None
+
+
+def test_a_running_loop_wakes_the_server_between_its_ticks():
+    """While the loop ticks in real time, the page's frames are built when the loop wakes
+    the server between two ticks (never during one), at about the dashboard's rate; the
+    server's own timer then only checks that the loop still does."""
+    from concurrent.futures import Future
+
+    from sotpy.dashboard.server import _Client
+
+    robot, _feature, task, _sot = ur5_reach()
+    loop = ControlLoop("loop", robot.device, 0.002)
+    inTick = []
+    increment = robot.device.increment
+
+    class Page:
+        def __init__(self):
+            self.frames = []
+            self.status = []
+
+        def write_message(self, data, binary=False):
+            if binary:
+                self.frames.append(data)
+                inTick.append(ticking[0])
+            elif json.loads(data)["type"] == "status":
+                self.status.append(json.loads(data)["tick"])
+            done = Future()  # written at the server's next turn, as a socket's write is
+            self.aio.call_soon(done.set_result, None)
+            return done
+
+    ticking = [False]
+
+    def timedIncrement(dt):
+        ticking[0] = True
+        try:
+            increment(dt)
+        finally:
+            ticking[0] = False
+
+    robot.device.increment = timedIncrement
+    with Dashboard(loop, rate=25.0) as ui:
+        ui.plot(task.error.path)
+        page = _Client(Page())
+        page.ws.aio = ui._aio
+        page.series = [(1, task.error.path, None)]
+        ui._clients.add(page)
+        loop.start()
+        time.sleep(1.0)
+        loop.stop()
+        woken = ui._pumpedByLoop
+        ui._clients.discard(page)
+    assert 15 <= len(page.ws.frames) <= 35, len(page.ws.frames)  # 25 a second
+    assert not any(inTick)  # none built while a tick ran
+    assert time.monotonic() - woken < 0.5
+    frames = [struct.unpack("<I", f[:4])[0] for f in page.ws.frames]
+    assert all(n > 0 for n in frames)
+    # the status too (about 4 a second), each at a later tick: not starved by the frames
+    ticks = page.ws.status
+    assert len(ticks) >= 3 and ticks == sorted(ticks) and ticks[-1] > ticks[0], ticks

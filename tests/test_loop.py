@@ -591,3 +591,54 @@ def test_a_spin_of_the_whole_period_never_sleeps_and_keeps_the_rate(spin):
     t1 = time.perf_counter()
     loop.stop()
     assert time.perf_counter() - t1 < 0.1 and not loop.running
+
+
+# -- idle calls ---------------------------------------------------------------------------
+class LoopTestBusyFlag(LoopTestDevice):
+    """Says whether a tick is running."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.inTick = False
+
+    def increment(self, dt: float) -> None:
+        self.inTick = True
+        super().increment(dt)
+        self.inTick = False
+
+
+def test_idle_calls_run_between_ticks_of_real_time_runs_only(caplog):
+    dev = LoopTestBusyFlag("dev")
+    dev.control.value = np.ones(1)
+    loop = ControlLoop("loop", dev, 0.001)
+    seen: list[tuple[int, bool]] = []
+
+    def call():
+        seen.append((loop.ticks, dev.inTick))
+
+    loop.addIdleCall(call, every=10)
+    loop.addIdleCall(call, every=10)  # added twice: called once
+    loop.start(ticks=60)
+    assert loop.wait(5.0)
+    assert seen == [(n, False) for n in (10, 20, 30, 40, 50, 60)]
+    loop.step(20)  # not a real-time run: no idle call
+    assert len(seen) == 6
+
+    def broken():
+        raise RuntimeError("boom")
+
+    loop.addIdleCall(broken)
+    with caplog.at_level(logging.ERROR, logger="sotpy.loop"):
+        loop.start(ticks=20)
+        assert loop.wait(5.0)
+    assert loop.ticks == 20 and loop.fault is None  # the loop went on without it
+    assert "idle call" in caplog.text and "removed" in caplog.text
+    assert seen[-1] == (20, False)
+    loop.rmIdleCall(call)
+    loop.rmIdleCall(call)  # not called any more: nothing
+    loop.start(ticks=10)
+    assert loop.wait(5.0) and seen[-1] == (20, False)
+    with pytest.raises(LoopError, match=r"addIdleCall: every must be an integer >= 1"):
+        loop.addIdleCall(call, every=0)
+    with pytest.raises(LoopError, match="expected a callable"):
+        loop.addIdleCall(42)

@@ -135,7 +135,7 @@ import os
 import threading
 import time
 import traceback
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -439,6 +439,7 @@ class ControlLoop(Entity):
         self._lastTorque: np.ndarray | None = None
         self._realtime = False
         self._pinError: OSError | None = None  # why the thread could not take its CPUs
+        self._idleCalls: tuple[tuple[Callable[[], None], int], ...] = ()
         self.resetStats()
 
     # -- properties ------------------------------------------------------------------
@@ -465,6 +466,27 @@ class ControlLoop(Entity):
             return None
         rest = frozenset(os.sched_getaffinity(0)) - self._cpus
         return rest or None
+
+    def addIdleCall(self, fn: Callable[[], None], every: int = 1) -> None:
+        """Call ``fn()`` in the loop's thread after every ``every``-th tick of a real-time
+        run (``start``, ``run``), once the tick is over and counted: outside its tick time,
+        in the slack before the next deadline, between two ticks.
+
+        For what must not run during a tick: a thread of this process that shares the
+        GIL with the loop (a dashboard's server) asks to be woken there, so that its
+        Python runs while the loop waits. ``fn`` must be short (a few us: hand the work
+        to another thread) and must not raise; one that raises is logged and removed."""
+        if not callable(fn):
+            raise LoopError(f"{self._who('addIdleCall')}: expected a callable, got {fn!r}")
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise LoopError(
+                f"{self._who('addIdleCall')}: every must be an integer >= 1, got {every!r}"
+            )
+        self._idleCalls = (*((f, k) for f, k in self._idleCalls if f != fn), (fn, every))
+
+    def rmIdleCall(self, fn: Callable[[], None]) -> None:
+        """Stop calling ``fn`` (see :meth:`addIdleCall`); nothing if it is not called."""
+        self._idleCalls = tuple((f, k) for f, k in self._idleCalls if f != fn)
 
     @property
     def fault(self) -> LoopFault | None:
@@ -735,7 +757,19 @@ class ControlLoop(Entity):
                     lock.release()
             deadline = self._record(begin, end, deadline, period, realtime)
             done += 1
+            if self._idleCalls and realtime:
+                self._callIdle()
         return None
+
+    def _callIdle(self) -> None:
+        n = self._stats.count
+        for fn, every in self._idleCalls:
+            if n % every == 0:
+                try:
+                    fn()
+                except Exception:  # never stop the loop for it
+                    log.exception("%s: idle call %r raised; removed", self._who("start"), fn)
+                    self.rmIdleCall(fn)
 
     def _record(self, begin: int, end: int, deadline: int, period: int, realtime: bool) -> int:
         """Count one tick (``begin``/``end`` in ns) in the current statistics; return the

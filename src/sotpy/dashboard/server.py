@@ -36,6 +36,14 @@ skipped and the rows wait in the ring (``seconds`` long): the page loses frames,
 ticks. Reading the graph and applying an edit hold ``pool.lock`` between two ticks, as
 the shell does for each input, in a worker thread (never on the server's own thread).
 A malformed request is refused with a message, logged, and changes nothing.
+
+**Between two ticks.** The server's thread shares the GIL with the loop's: woken in the
+middle of a tick, it would take the GIL at the tick's first release (NumPy releases it in
+its larger operations) and keep it up to Python's switch interval. So while the loop
+ticks in real time, it wakes the server itself, between two ticks, ``rate`` times a
+second (:meth:`~sotpy.loop.ControlLoop.addIdleCall`), and the frames and the status are
+made then; the server's own timer only checks, twice a second, that the loop still
+does, and takes over when it stops.
 """
 
 from __future__ import annotations
@@ -74,6 +82,8 @@ STATIC = Path(__file__).with_name("static")
 DEFAULT_RATE = 30.0
 #: How often the status (loop, stack, fresh signals) is sent, in s.
 STATUS_PERIOD = 0.25
+#: How often (s) the server's own timer checks that a running loop still wakes it.
+IDLE_CHECK = 0.5
 #: Python's switch interval while a dashboard serves (s; Python's default is 5 ms): the
 #: longest a tick that wants the GIL back waits for the server's thread to yield it.
 SWITCH_INTERVAL = 0.0005
@@ -180,6 +190,8 @@ class Dashboard:
         self._graphPending = False
         self._stats: Any = None
         self._statsAt = 0.0
+        self._nextFrame = self._nextStatus = 0.0
+        self._pumpedByLoop = -math.inf  # when the loop last woke the server (monotonic s)
         others = loop.otherCpus() if callable(getattr(loop, "otherCpus", None)) else None
         self.cpus: frozenset[int] | None = others
         self._work = ThreadPoolExecutor(
@@ -204,6 +216,8 @@ class Dashboard:
         if self.recorder is not None:
             self.recorder.attach()
         _switchInterval(+1)
+        if callable(getattr(loop, "addIdleCall", None)):  # frames between the loop's ticks
+            loop.addIdleCall(self._loopWakes, max(1, round(1.0 / (self.rate * dt))))
         self._thread = threading.Thread(target=self._serve, name=f"{who} server", daemon=True)
         self._thread.start()
         if not self._ready.wait(20.0) or self._error is not None:
@@ -263,6 +277,8 @@ class Dashboard:
         with contextlib.suppress(OSError):
             self._sock.close()
         _switchInterval(-1)
+        if callable(getattr(self.loop, "rmIdleCall", None)):
+            self.loop.rmIdleCall(self._loopWakes)
         if self.recorder is not None:
             with contextlib.suppress(Exception):
                 self.recorder.detach()
@@ -369,12 +385,7 @@ class Dashboard:
                 self._app, max_body_size=MAX_MESSAGE, idle_connection_timeout=60
             )
             self._http.add_sockets([self._sock])
-            from tornado.ioloop import PeriodicCallback
-
-            self._frames = PeriodicCallback(self._sendFrames, 1000.0 / self.rate)
-            self._frames.start()
-            self._statusTimer = PeriodicCallback(self._sendStatus, 1000.0 * STATUS_PERIOD)
-            self._statusTimer.start()
+            self._timer = aio.call_soon(self._timerPump)
         except BaseException as exc:
             self._error = exc
             self._ready.set()
@@ -387,9 +398,40 @@ class Dashboard:
                 aio.run_until_complete(aio.shutdown_asyncgens())
             aio.close()
 
+    # -- the pump: frames and status, between two ticks of a running loop ----------------
+    def _pump(self) -> None:
+        """Send what is due: each page's frame (``rate`` a second) and the status (every
+        ``STATUS_PERIOD`` s)."""
+        now = time.monotonic()
+        # the status first: it is not sent to a page whose last frame is still being
+        # written, as the frame just sent would be (a wakeup a little early is on time)
+        if now >= self._nextStatus:
+            self._nextStatus = now + 0.9 * STATUS_PERIOD
+            self._sendStatus()
+        if now >= self._nextFrame:
+            self._nextFrame = now + 0.8 / self.rate
+            self._sendFrames()
+
+    def _loopWakes(self) -> None:
+        """The loop's idle call (its thread, between two ticks): wake the server's thread
+        to pump, when a page is open. A few us: one ``call_soon_threadsafe``."""
+        if self._clients and not self._closed:
+            self._pumpedByLoop = time.monotonic()
+            with contextlib.suppress(RuntimeError):  # closed meanwhile
+                self._aio.call_soon_threadsafe(self._pump)
+
+    def _timerPump(self) -> None:
+        """The server's own timer: it pumps while the loop is not ticking in real time;
+        while the loop wakes the server between its ticks, it only checks twice a second
+        that it still does (its own wakeups would fall anywhere, inside ticks too)."""
+        if time.monotonic() - self._pumpedByLoop < 0.25:
+            self._timer = self._aio.call_later(IDLE_CHECK, self._timerPump)
+            return
+        self._pump()
+        self._timer = self._aio.call_later(1.0 / self.rate, self._timerPump)
+
     def _stopServing(self) -> None:
-        self._frames.stop()
-        self._statusTimer.stop()
+        self._timer.cancel()
         self._http.stop()
         for c in list(self._clients):
             with contextlib.suppress(Exception):
