@@ -422,9 +422,10 @@ class Dashboard:
 
     def _timerPump(self) -> None:
         """The server's own timer: it pumps while the loop is not ticking in real time;
-        while the loop wakes the server between its ticks, it only checks twice a second
-        that it still does (its own wakeups would fall anywhere, inside ticks too)."""
-        if time.monotonic() - self._pumpedByLoop < 0.25:
+        while the loop wakes the server between its ticks, or while no page is open, it
+        only checks twice a second (its own wakeups would fall anywhere, inside ticks
+        too)."""
+        if not self._clients or time.monotonic() - self._pumpedByLoop < 0.25:
             self._timer = self._aio.call_later(IDLE_CHECK, self._timerPump)
             return
         self._pump()
