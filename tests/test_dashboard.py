@@ -427,11 +427,12 @@ def test_sotpy_demo_ui_builds_the_graph_and_serves_it():
     last = max(os.sched_getaffinity(0))
     out = subprocess.run(
         [sys.executable, "-m", "sotpy", "demo", "nao", "--ui", "--hold", "0.5",
-         "--loop-cpu", str(last)],
+         "--loop-cpu", str(last), "--loop-never-idle"],
         capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
     assert f"the loop's thread runs on CPU [{last}]" in out.stdout
+    assert "the loop yields for the whole period" in out.stdout
     assert "paused at tick 1" in out.stdout
     assert "http://127.0.0.1:" in out.stdout and "?token=" in out.stdout
     assert "stopped; loop statistics" in out.stdout

@@ -125,3 +125,16 @@ def test_shell_help_shows_the_defaults(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "(default talos)" in text and "(default 0.001: 1 kHz)" in text
     assert "default: IPython when installed" in text
+
+
+def test_the_namespace_loop_takes_its_cpus_and_spin():
+    import os
+
+    last = max(os.sched_getaffinity(0))
+    ns = makeNamespace("ur5", dt=0.01, cpus={last}, spin=0.01)
+    loop = ns["loop"]
+    assert loop.cpus == frozenset({last})
+    assert loop.spin == pytest.approx(0.01) and loop.spin >= loop.dt
+    pool.clear()
+    plain = makeNamespace("ur5", dt=0.01)["loop"]
+    assert plain.cpus is None and plain.spin < plain.dt

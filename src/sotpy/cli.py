@@ -38,7 +38,7 @@ from .demos import (
     collision_options,
     collision_run,
     finite_float,
-    loop_cpus,
+    loop_settings,
     positive_float,
     reach_options,
     reach_run,
@@ -273,7 +273,7 @@ def _shell_run(args: argparse.Namespace) -> int:
     from .shell import interact, makeNamespace
 
     try:
-        ns = makeNamespace(args.robot, args.dt, loop_cpus(args))
+        ns = makeNamespace(args.robot, args.dt, **loop_settings(args))
         ui = _open_ui(args, ns) if args.ui else None
     except SotpyError as exc:
         print(f"sotpy shell: {exc}", file=sys.stderr)
@@ -349,7 +349,7 @@ def _serve_run(args: argparse.Namespace) -> int:
         )
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     try:
-        ns = makeNamespace(args.robot, args.dt, loop_cpus(args))
+        ns = makeNamespace(args.robot, args.dt, **loop_settings(args))
     except SotpyError as exc:
         print(f"sotpy serve: {exc}", file=sys.stderr)
         return 1

@@ -454,6 +454,12 @@ class ControlLoop(Entity):
         return self._dt
 
     @property
+    def spin(self) -> float:
+        """The time (s) spent yielding before each deadline instead of sleeping; at least
+        ``dt``: the thread never sleeps (its CPU never idles)."""
+        return self._spin_ns * 1e-9
+
+    @property
     def cpus(self) -> frozenset[int] | None:
         """The CPUs the background thread runs on (None: not pinned)."""
         return self._cpus

@@ -178,7 +178,10 @@ def ipythonMatcher(namespace: Mapping[str, Any]) -> Any:
 
 
 def makeNamespace(
-    robot: str | None = "talos", dt: float = 1e-3, cpus: Iterable[int] | None = None
+    robot: str | None = "talos",
+    dt: float = 1e-3,
+    cpus: Iterable[int] | None = None,
+    spin: float | None = None,
 ) -> dict[str, Any]:
     """The namespace of the shell and of the remote interpreter.
 
@@ -187,6 +190,7 @@ def makeNamespace(
             no robot, no loop (the helpers raise until ``loop`` is set).
         dt: the loop's period and the device's time step, in s.
         cpus: the CPUs the loop's thread runs on (``ControlLoop(..., cpus=)``), or None.
+        spin: the loop's ``spin`` (None: its default; ``dt``: its CPU never idles).
     """
     ns: dict[str, Any] = {"__name__": "__main__", "np": np, "pool": pool, "plug": plug}
     ns["unlocked"] = unlocked
@@ -197,7 +201,8 @@ def makeNamespace(
         r = load_robot(robot)
         r.device.setControlType("velocity")
         r.device.control.value = np.zeros(r.model.nv)
-        loop = ControlLoop("loop", r.device, dt, cpus=cpus)
+        extra = {} if spin is None else {"spin": spin}
+        loop = ControlLoop("loop", r.device, dt, cpus=cpus, **extra)
         ns["robot"] = r
     for e in pool.entities():
         if e.name.isidentifier():

@@ -175,12 +175,25 @@ def ui_options(parser: argparse.ArgumentParser, demo: bool = False) -> None:
         help="run the control loop's thread on CPU N (repeat for several) and the "
         "dashboard's threads on the others, so that they do not slow its ticks",
     )
+    g.add_argument(
+        "--loop-never-idle",
+        action="store_true",
+        help="the loop yields for the whole period instead of sleeping (spin = dt): its "
+        "CPU never idles and its ticks run with warm caches, for a whole CPU's worth of "
+        "power; use it with --loop-cpu",
+    )
 
 
-def loop_cpus(args: argparse.Namespace) -> set[int] | None:
-    """The CPUs ``--loop-cpu`` asks the control loop to run on (None: not pinned)."""
+def loop_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`~sotpy.loop.ControlLoop` keywords that ``--loop-cpu`` (``cpus``) and
+    ``--loop-never-idle`` (``spin = dt``) ask for."""
+    out: dict[str, Any] = {}
     cpus = getattr(args, "loop_cpu", None)
-    return set(cpus) if cpus else None
+    if cpus:
+        out["cpus"] = set(cpus)
+    if getattr(args, "loop_never_idle", False):
+        out["spin"] = args.dt
+    return out
 
 
 def open_dashboard(
@@ -217,7 +230,7 @@ def _demo_ui(args: argparse.Namespace, name: str, build: Callable[[], dict[str, 
         device = pool.getEntity(f"{result['prefix']}_device")
         model, visual, _ = load_model(args.robot)
         robot = types.SimpleNamespace(model=model, visual_model=visual)
-        loop = ControlLoop(f"{result['prefix']}_loop", device, args.dt, cpus=loop_cpus(args))
+        loop = ControlLoop(f"{result['prefix']}_loop", device, args.dt, **loop_settings(args))
         ui = open_dashboard(loop, robot, args)
     except SotpyError as exc:
         print(f"sotpy demo {name}: {exc}", file=sys.stderr)
@@ -227,6 +240,11 @@ def _demo_ui(args: argparse.Namespace, name: str, build: Callable[[], dict[str, 
         print(
             f"sotpy demo {name}: the loop's thread runs on CPU {sorted(loop.cpus)}, the "
             f"dashboard's on {'any' if rest is None else sorted(rest)}",
+            flush=True,
+        )
+    if loop.spin >= loop.dt:
+        print(
+            f"sotpy demo {name}: the loop yields for the whole period (its CPU never idles)",
             flush=True,
         )
     print(
