@@ -358,7 +358,11 @@ def test_a_busy_page_loses_frames_not_ticks():
         binary = [f for f in page.ws.frames if isinstance(f, bytes)]  # (the plot's notice)
         assert len(binary) == 1 and page.skipped >= 4  # (the server's timer skips too)
         assert loop.ticks == 50 and loop.fault is None
-        assert page.cursor == 10  # the rows after it wait in the ring for the next frame
+        # the rows after the one frame it took wait in the ring for the next frame (the
+        # server's own timer may have sent it before the test's first call)
+        hlen = struct.unpack("<I", binary[0][:4])[0]
+        head = json.loads(binary[0][4 : 4 + hlen])
+        assert 1 <= page.cursor == head["count"] == head["n"] <= 10
         assert len(ui.data()["tick"]) == 50
 
 
@@ -566,3 +570,55 @@ def test_a_running_loop_wakes_the_server_between_its_ticks():
     # the status too (about 4 a second), each at a later tick: not starved by the frames
     ticks = page.ws.status
     assert len(ticks) >= 3 and ticks == sorted(ticks) and ticks[-1] > ticks[0], ticks
+
+
+def test_what_the_control_does_not_need_is_recorded_after_the_tick():
+    """In a real-time run, a plotted signal that shares no step with the device's control
+    is computed in the loop's idle call, after the tick, from the same state (the same
+    values); what the control needs is recorded in the tick. Every row is published. In
+    ``step`` (no idle calls) everything is recorded in the tick, as before."""
+    from sotpy.graph import Entity, Input, Output
+
+    robot, _feature, _task, sot = ur5_reach()
+    ticking = [False]
+    increment = robot.device.increment
+
+    def timedIncrement(dt):
+        ticking[0] = True
+        try:
+            increment(dt)
+        finally:
+            ticking[0] = False
+
+    robot.device.increment = timedIncrement
+    calls: list[tuple[int, bool]] = []
+
+    class LateProbe(Entity):
+        q = Input(VECTOR_T)
+
+        @Output(VECTOR_T, deps=("q",), withTime=True, timeDependent=True)
+        def twice(self, t, q):
+            calls.append((t, ticking[0]))
+            return 2.0 * q
+
+    probe = LateProbe("late_probe")
+    plug(robot.device.state, probe.q)
+    loop = ControlLoop("loop", robot.device, 0.002)
+    with Dashboard(loop, rate=25.0) as ui:
+        ui.plot(probe.twice.path, sot.control.path, robot.device.state.path)
+        loop.start()
+        time.sleep(0.3)
+        loop.stop()
+        rec = ui.recorder
+        assert [c.signal for c in rec._late] == [probe.twice]
+        assert sot.control in [c.signal for c in rec._early]
+        assert rec.count == loop.ticks and rec._pending is None  # every row published
+        realtime = list(calls)
+        assert len(realtime) >= loop.ticks - 1 and not any(f for _, f in realtime)
+        data = ui.data()
+        np.testing.assert_array_equal(data[probe.twice.path], 2.0 * data[robot.device.state.path])
+        calls.clear()
+        loop.step(5)
+        assert len(calls) == 5 and all(f for _, f in calls)  # in the tick, as before
+        data = ui.data()
+        np.testing.assert_array_equal(data[probe.twice.path], 2.0 * data[robot.device.state.path])

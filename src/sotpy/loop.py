@@ -440,6 +440,7 @@ class ControlLoop(Entity):
         self._realtime = False
         self._pinError: OSError | None = None  # why the thread could not take its CPUs
         self._idleCalls: tuple[tuple[Callable[[], None], int], ...] = ()
+        self._inRealTime = False  # a real-time run is in progress (idle calls follow ticks)
         self.resetStats()
 
     # -- properties ------------------------------------------------------------------
@@ -472,6 +473,12 @@ class ControlLoop(Entity):
             return None
         rest = frozenset(os.sched_getaffinity(0)) - self._cpus
         return rest or None
+
+    @property
+    def inRealTimeRun(self) -> bool:
+        """Whether a real-time run (``start``, ``run``) is in progress: the idle calls
+        (:meth:`addIdleCall`) follow each of its ticks."""
+        return self._inRealTime
 
     def addIdleCall(self, fn: Callable[[], None], every: int = 1) -> None:
         """Call ``fn()`` in the loop's thread after every ``every``-th tick of a real-time
@@ -708,8 +715,14 @@ class ControlLoop(Entity):
     def _loop(self, ticks: int | None, realtime: bool) -> BaseException | None:
         """Run ``ticks`` ticks (None: until stopped), on a frozen heap when real-time;
         return what a tick raised (after the safe stop), or None."""
-        with frozenHeap() if realtime else contextlib.nullcontext():
+        if not realtime:
             return self._ticks(ticks, realtime)
+        self._inRealTime = True
+        try:
+            with frozenHeap():
+                return self._ticks(ticks, realtime)
+        finally:
+            self._inRealTime = False
 
     def _ticks(self, ticks: int | None, realtime: bool) -> BaseException | None:
         lock = pool.lock

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SotpyError
-from ..graph import INT, Entity, OutputSignal, Plan, checkPlugged
+from ..graph import INT, Entity, OutputSignal, Plan, checkPlugged, compilePlan
 from ..graph.pool import pool
 from ..graph.signal import CONSTANT, FUNCTION, PLUGGED, UNSET, InputSignal, Signal
 from ..graph.types import _ravel
@@ -486,6 +486,14 @@ class Recorder:
     the tick goes on. The server reads new rows with :meth:`since`, without a lock (the
     tick writes a row, then publishes it by moving the row count).
 
+    **After the tick.** With :attr:`loop` set (a dashboard sets it and registers
+    :meth:`finishRow` as the loop's idle call), a real-time run records in the tick only
+    the signals whose computation shares a step with the device's control. The others
+    (a task's error that the SOT's fused rows never evaluate, a probe on the state) are
+    computed by :meth:`finishRow` right after the tick, holding ``pool.lock``, from the
+    same state and at the same tick: the same values, outside the tick's time. The row is
+    published then. ``step`` (no idle calls) records everything in the tick.
+
     ``data()`` and ``save()`` give the rows in the tracer's forms (``Tracer.data``,
     ``Tracer.dump``: ``.npz``, ``.csv``; ``saveFiles``: SoT's one text file per signal).
     """
@@ -505,6 +513,13 @@ class Recorder:
         self._active: tuple[_Column, ...] = ()
         self._plan: Plan | None = None
         self._holders = -1  # the pool's version when each column's holder was found
+        self.loop: Any = None  # the ControlLoop whose idle call finishes the rows
+        self._pending: tuple[int, int] | None = None  # (row, tick) waiting for finishRow
+        self._classified = -1  # the pool's version when early and late were decided
+        self._early: tuple[_Column, ...] = ()
+        self._late: tuple[_Column, ...] = ()
+        self._earlyPlan: Plan | None = None
+        self._latePlan: Plan | None = None
         self.hook = OutputSignal(
             _Owner(name), "record", INT, self._record, withTime=True, timeDependent=True,
             doc="rows recorded by the dashboard",
@@ -513,9 +528,40 @@ class Recorder:
 
     # -- the tick's side ------------------------------------------------------------
     def _record(self, t: int) -> int:
+        if self._pending is not None:  # the last row's idle call did not come (a fault)
+            self.finishRow()
+        if self._classified != pool.version:
+            self._classify()
         i = self._count % self.size
         self._ticks[i] = t
-        plan = self._plan
+        loop = self.loop
+        defer = bool(self._late) and loop is not None and loop.inRealTimeRun
+        plan, columns = (self._earlyPlan, self._early) if defer else (self._plan, self._active)
+        self._store(plan, columns, i, t)
+        if defer:  # the rest after the tick, in the loop's idle call (finishRow)
+            self._pending = (i, t)
+            return self._count
+        self._count += 1  # publishes the row
+        return self._count
+
+    def finishRow(self) -> None:
+        """Record the row's columns the control does not need, and publish the row. The
+        loop's idle call, between two ticks (see :class:`Recorder`); the next tick's hook
+        when the idle call did not come."""
+        if self._pending is None:
+            return
+        with pool.lock:  # as a tick: no edit seen half done
+            pending = self._pending
+            if pending is None:
+                return
+            i, t = pending
+            self._store(self._latePlan, self._late, i, t)
+            self._pending = None
+            self._count += 1  # publishes the row
+
+    def _store(self, plan: Plan | None, columns: tuple[_Column, ...], i: int, t: int) -> None:
+        """Bring ``columns`` up to date at ``t`` (``plan``: their compiled steps) and copy
+        their values into row ``i``."""
         if plan is not None:
             try:  # the recorded signals, with the tick's compiled steps (fused rows)
                 plan.run(t)
@@ -525,7 +571,7 @@ class Recorder:
             for c in self._active:
                 c.holder = c.signal._holder()
             self._holders = pool.version
-        for c in self._active:
+        for c in columns:
             data = c.data
             if c.error is not None:
                 if data is not None:
@@ -562,8 +608,6 @@ class Recorder:
                     data[i] = np.nan
         if self._plan is None and self._active:
             self._replan()
-        self._count += 1  # publishes the row
-        return self._count
 
     def _replan(self) -> None:
         """A compiled :class:`~sotpy.graph.Plan` of the signals still recorded: the
@@ -572,6 +616,35 @@ class Recorder:
         computed again (it is up to date at that tick)."""
         sinks = [c.signal for c in self._active if c.error is None]
         self._plan = Plan(sinks) if sinks else None
+        self._classified = -1  # which columns wait for the idle call: decided again
+
+    def _classify(self) -> None:
+        """Split the columns: those whose computation shares a step with the device's
+        control (``early``: recorded in the tick, where the control needs the same
+        values) and those that share none (``late``: recorded after the tick by
+        :meth:`finishRow`, from the same state: the same values, off the tick's time).
+        A column of no step (a state, a constant) is early: a copy."""
+        self._classified = pool.version
+        control = getattr(self.device, "control", None)
+        early, late = list(self._active), []
+        try:
+            used = {id(s) for s in compilePlan([control]).steps} if control is not None else None
+        except Exception:  # an unplugged control: no split (the tick will say why)
+            used = None
+        if used is not None and self.loop is not None:
+            early, late = [], []
+            for c in self._active:
+                try:
+                    steps = compilePlan([c.signal]).steps if c.error is None else []
+                except Exception:
+                    steps = []
+                isLate = bool(steps) and not any(id(s) in used for s in steps)
+                (late if isLate else early).append(c)
+        self._early, self._late = tuple(early), tuple(late)
+        sinks = [c.signal for c in early if c.error is None]
+        self._earlyPlan = Plan(sinks) if sinks else None
+        sinks = [c.signal for c in late if c.error is None]
+        self._latePlan = Plan(sinks) if sinks else None
 
     # -- configuration (server threads, holding pool.lock) ------------------------
     def attach(self) -> None:
@@ -590,6 +663,7 @@ class Recorder:
         if self._attached:
             with pool.lock:
                 self.device.after.rmSignal(self.hook, missing_ok=True)
+                self.finishRow()  # a row left waiting for an idle call
             self._attached = False
 
     def add(self, path: str) -> None:

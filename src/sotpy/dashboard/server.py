@@ -218,6 +218,9 @@ class Dashboard:
         _switchInterval(+1)
         if callable(getattr(loop, "addIdleCall", None)):  # frames between the loop's ticks
             loop.addIdleCall(self._loopWakes, max(1, round(1.0 / (self.rate * dt))))
+            if self.recorder is not None:  # what the control does not need, after the tick
+                self.recorder.loop = loop
+                loop.addIdleCall(self.recorder.finishRow)
         self._thread = threading.Thread(target=self._serve, name=f"{who} server", daemon=True)
         self._thread.start()
         if not self._ready.wait(20.0) or self._error is not None:
@@ -279,6 +282,8 @@ class Dashboard:
         _switchInterval(-1)
         if callable(getattr(self.loop, "rmIdleCall", None)):
             self.loop.rmIdleCall(self._loopWakes)
+            if self.recorder is not None:
+                self.loop.rmIdleCall(self.recorder.finishRow)
         if self.recorder is not None:
             with contextlib.suppress(Exception):
                 self.recorder.detach()
