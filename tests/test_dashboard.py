@@ -622,3 +622,40 @@ def test_what_the_control_does_not_need_is_recorded_after_the_tick():
         assert len(calls) == 5 and all(f for _, f in calls)  # in the tick, as before
         data = ui.data()
         np.testing.assert_array_equal(data[probe.twice.path], 2.0 * data[robot.device.state.path])
+
+
+def test_a_row_whose_idle_call_did_not_come_is_not_filled_from_a_later_state():
+    """A row left waiting for its idle call (a tick's fault stops the loop before it)
+    gets NaN for the columns recorded after the tick when a later tick ran meanwhile,
+    never values of a later state under its tick."""
+    from sotpy.graph import Entity, Input, Output
+
+    class LateProbe2(Entity):
+        q = Input(VECTOR_T)
+
+        @Output(VECTOR_T, deps=("q",), withTime=True, timeDependent=True)
+        def twice(self, t, q):
+            return 2.0 * q
+
+    robot, _feature, _task, _sot = ur5_reach()
+    probe = LateProbe2("late_probe2")
+    plug(robot.device.state, probe.q)
+    loop = ControlLoop("loop", robot.device, 0.002)
+    with Dashboard(loop) as ui:
+        ui.plot(probe.twice.path, robot.device.state.path)
+        loop.step(2)
+        rec = ui.recorder
+        loop._inRealTime = True  # as inside a real-time run whose idle call never comes
+        try:
+            loop.step(1)  # (step does not call idle calls)
+            assert rec._pending is not None and rec.count == 2
+            loop.step(1)  # the next tick's hook finishes the waiting row first
+        finally:
+            loop._inRealTime = False
+        assert rec._pending is not None  # this tick's row waits in turn
+        rec.finishRow()  # same state: computed
+        data = ui.data()
+        twice, state = data[probe.twice.path], data[robot.device.state.path]
+        assert len(twice) == 4
+        np.testing.assert_array_equal(twice[[0, 1, 3]], 2.0 * state[[0, 1, 3]])
+        assert np.isnan(twice[2]).all() and not np.isnan(state[2]).any()

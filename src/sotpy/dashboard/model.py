@@ -555,7 +555,13 @@ class Recorder:
             if pending is None:
                 return
             i, t = pending
-            self._store(self._latePlan, self._late, i, t)
+            state = getattr(self.device, "state", None)
+            if getattr(state, "time", t) == t:  # the state the row's tick left
+                self._store(self._latePlan, self._late, i, t)
+            else:  # a tick ran since (its idle call did not come): not a later state's
+                for c in self._late:  # values under this tick: not recorded
+                    if c.data is not None:
+                        c.data[i] = np.nan
             self._pending = None
             self._count += 1  # publishes the row
 
