@@ -49,6 +49,34 @@ def ur5_reach(forget: bool = False):
     return robot, feature, task, sot
 
 
+def _flagTicks(device) -> list[bool]:
+    """``[ticking]``: True while ``device.increment`` runs (it is wrapped)."""
+    ticking = [False]
+    increment = device.increment
+
+    def flagged(dt):
+        ticking[0] = True
+        try:
+            increment(dt)
+        finally:
+            ticking[0] = False
+
+    device.increment = flagged
+    return ticking
+
+
+def _pinnedLoop():
+    """(the CPUs of this process, the UR5 reach's loop pinned to the last one); skips
+    with fewer than 2 CPUs."""
+    import os
+
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("needs 2 CPUs")
+    robot, _, _, _ = ur5_reach()
+    return cpus, ControlLoop("loop", robot.device, DT, cpus={cpus[-1]})
+
+
 def _get(url: str, cookie: str | None = None) -> tuple[int, bytes, dict]:
     req = urllib.request.Request(url)
     if cookie:
@@ -500,11 +528,7 @@ def test_a_pinned_loop_keeps_the_dashboards_threads_off_its_cpu():
     import os
     import threading
 
-    cpus = sorted(os.sched_getaffinity(0))
-    if len(cpus) < 2:
-        pytest.skip("needs 2 CPUs")
-    robot, _, _, _ = ur5_reach()
-    loop = ControlLoop("loop", robot.device, DT, cpus={cpus[-1]})
+    cpus, loop = _pinnedLoop()
     assert loop.otherCpus() == frozenset(cpus[:-1])
     with Dashboard(loop, seconds=1.0) as ui:
         assert ui.cpus == frozenset(cpus[:-1])
@@ -513,7 +537,7 @@ def test_a_pinned_loop_keeps_the_dashboards_threads_off_its_cpu():
         assert len(mine) >= 2  # the server and the edits' worker
         for t in mine:
             assert os.sched_getaffinity(t.native_id) == set(cpus[:-1]), t.name
-    unpinned = ControlLoop("loop2", robot.device, DT)
+    unpinned = ControlLoop("loop2", loop.device, DT)
     assert unpinned.otherCpus() is None
     with Dashboard(unpinned, seconds=1.0) as ui:
         assert ui.cpus is None
@@ -530,7 +554,6 @@ def test_a_running_loop_wakes_the_server_between_its_ticks():
     robot, _feature, task, _sot = ur5_reach()
     loop = ControlLoop("loop", robot.device, 0.002)
     inTick = []
-    increment = robot.device.increment
 
     class Page:
         def __init__(self):
@@ -547,16 +570,7 @@ def test_a_running_loop_wakes_the_server_between_its_ticks():
             self.aio.call_soon(done.set_result, None)
             return done
 
-    ticking = [False]
-
-    def timedIncrement(dt):
-        ticking[0] = True
-        try:
-            increment(dt)
-        finally:
-            ticking[0] = False
-
-    robot.device.increment = timedIncrement
+    ticking = _flagTicks(robot.device)
     with Dashboard(loop, rate=25.0) as ui:
         ui.plot(task.error.path)
         page = _Client(Page())
@@ -586,17 +600,7 @@ def test_what_the_control_does_not_need_is_recorded_after_the_tick():
     from sotpy.graph import Entity, Input, Output
 
     robot, _feature, _task, sot = ur5_reach()
-    ticking = [False]
-    increment = robot.device.increment
-
-    def timedIncrement(dt):
-        ticking[0] = True
-        try:
-            increment(dt)
-        finally:
-            ticking[0] = False
-
-    robot.device.increment = timedIncrement
+    ticking = _flagTicks(robot.device)
     calls: list[tuple[int, bool]] = []
 
     class LateProbe(Entity):

@@ -11,7 +11,7 @@ import pytest
 
 from sotpy.dashboard import Dashboard
 from sotpy.loop import ControlLoop
-from test_dashboard import DT, ur5_reach
+from test_dashboard import DT, _pinnedLoop, ur5_reach
 
 pytestmark = pytest.mark.needs("chromium")
 
@@ -126,11 +126,7 @@ def test_a_browser_given_cpus_runs_every_process_there():
 
     from sotpy.dashboard.browser import HeadlessPage
 
-    cpus = sorted(os.sched_getaffinity(0))
-    if len(cpus) < 2:
-        pytest.skip("needs 2 CPUs")
-    robot, _, _, _ = ur5_reach()
-    loop = ControlLoop("loop", robot.device, DT, cpus={cpus[-1]})
+    cpus, loop = _pinnedLoop()
     with Dashboard(loop) as ui, HeadlessPage(ui.url(), 800, 600, cpus=loop.otherCpus()) as page:
         page.waitFor("document.querySelectorAll('#graph .node').length >= 6")
         procs = _descendants(page._proc.pid)

@@ -511,7 +511,6 @@ class Recorder:
         self._count = 0
         self._columns: dict[str, _Column] = {}
         self._active: tuple[_Column, ...] = ()
-        self._plan: Plan | None = None
         self._holders = -1  # the pool's version when each column's holder was found
         self.loop: Any = None  # the ControlLoop whose idle call finishes the rows
         self._pending: tuple[int, int] | None = None  # (row, tick) waiting for finishRow
@@ -534,13 +533,12 @@ class Recorder:
             self._classify()
         i = self._count % self.size
         self._ticks[i] = t
+        self._store(self._earlyPlan, self._early, i, t)
         loop = self.loop
-        defer = bool(self._late) and loop is not None and loop.inRealTimeRun
-        plan, columns = (self._earlyPlan, self._early) if defer else (self._plan, self._active)
-        self._store(plan, columns, i, t)
-        if defer:  # the rest after the tick, in the loop's idle call (finishRow)
-            self._pending = (i, t)
+        if self._late and loop is not None and loop.inRealTimeRun:
+            self._pending = (i, t)  # the rest after the tick, in the loop's idle call
             return self._count
+        self._store(self._latePlan, self._late, i, t)
         self._count += 1  # publishes the row
         return self._count
 
@@ -572,7 +570,7 @@ class Recorder:
             try:  # the recorded signals, with the tick's compiled steps (fused rows)
                 plan.run(t)
             except Exception:  # the reads below find the signal that raises
-                self._plan = None
+                self._replan()
         if self._holders != pool.version:  # a plug changed: who holds each value
             for c in self._active:
                 c.holder = c.signal._holder()
@@ -612,40 +610,37 @@ class Recorder:
                 )
                 if data is not None:
                     data[i] = np.nan
-        if self._plan is None and self._active:
-            self._replan()
 
     def _replan(self) -> None:
-        """A compiled :class:`~sotpy.graph.Plan` of the signals still recorded: the
-        values of the next tick are computed by the same kind of steps as the tick's
-        own plan (the SOT's fused rows), and a value the next tick needs is then not
-        computed again (it is up to date at that tick)."""
-        sinks = [c.signal for c in self._active if c.error is None]
-        self._plan = Plan(sinks) if sinks else None
-        self._classified = -1  # which columns wait for the idle call: decided again
+        """Make the plans again at the next row (the columns or their errors changed)."""
+        self._classified = -1
 
     def _classify(self) -> None:
-        """Split the columns: those whose computation shares a step with the device's
-        control (``early``: recorded in the tick, where the control needs the same
-        values) and those that share none (``late``: recorded after the tick by
-        :meth:`finishRow`, from the same state: the same values, off the tick's time).
-        A column of no step (a state, a constant) is early: a copy."""
+        """The recorded signals' compiled :class:`~sotpy.graph.Plan` s: their values at
+        the next tick are computed by the same kind of steps as the tick's own plan (the
+        SOT's fused rows), and a value the next tick needs is then not computed again.
+        Two plans, splitting the columns: those whose computation shares a step with the
+        device's control (``early``: recorded in the tick, where the control needs the
+        same values) and, with a :attr:`loop`, those that share none (``late``: recorded
+        after the tick by :meth:`finishRow`, from the same state: the same values, off
+        the tick's time). A column of no step (a state, a constant) is early: a copy."""
         self._classified = pool.version
-        control = getattr(self.device, "control", None)
         early, late = list(self._active), []
-        try:
-            used = {id(s) for s in compilePlan([control]).steps} if control is not None else None
-        except Exception:  # an unplugged control: no split (the tick will say why)
-            used = None
-        if used is not None and self.loop is not None:
-            early, late = [], []
-            for c in self._active:
-                try:
-                    steps = compilePlan([c.signal]).steps if c.error is None else []
-                except Exception:
-                    steps = []
-                isLate = bool(steps) and not any(id(s) in used for s in steps)
-                (late if isLate else early).append(c)
+        control = getattr(self.device, "control", None)
+        if self.loop is not None and control is not None:
+            try:
+                used = {id(s) for s in compilePlan([control]).steps}
+            except Exception:  # an unplugged control: no split (the tick will say why)
+                used = None
+            if used is not None:
+                early = []
+                for c in self._active:
+                    try:
+                        steps = compilePlan([c.signal]).steps if c.error is None else []
+                    except Exception:  # its read in the tick says why
+                        steps = []
+                    isLate = bool(steps) and not any(id(s) in used for s in steps)
+                    (late if isLate else early).append(c)
         self._early, self._late = tuple(early), tuple(late)
         sinks = [c.signal for c in early if c.error is None]
         self._earlyPlan = Plan(sinks) if sinks else None
@@ -708,9 +703,6 @@ class Recorder:
         return self._count
 
     # -- reading (no lock) -----------------------------------------------------------
-    def _rows(self, start: int, end: int) -> np.ndarray:
-        return np.arange(start, end) % self.size
-
     def _take(self, a: np.ndarray, start: int, end: int, cols: list[int] | None = None) -> Any:
         """Rows ``start .. end - 1`` of the ring ``a`` (its first axis), oldest first, of
         the columns ``cols`` (None: all): a copy made of at most two slices (fancy
@@ -753,13 +745,12 @@ class Recorder:
         before a signal was added are NaN."""
         end = self._count
         start = max(end - self.size + 1, 0)
-        idx = self._rows(start, end)
-        ticks = self._ticks[idx].copy()
+        ticks = self._take(self._ticks, start, end)
         out: dict[str, np.ndarray] = {"time": ticks * self.dt, "tick": ticks}
         for path, c in list(self._columns.items()):
             if c.data is None:
                 continue
-            out[path] = c.data[idx].copy()
+            out[path] = self._take(c.data, start, end)
         return out
 
     def save(self, path: str | Path) -> str:
