@@ -4,7 +4,10 @@ answers are right)."""
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from sotpy.graph import pool
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_graph.py"
 
@@ -45,6 +48,40 @@ def test_collision_benchmark_runs_and_both_stacks_reach():
     ((a, b),) = result["wrist_error"]
     assert abs(a - b) < 1e-3
     assert "ratio of medians" in module.table(result)
+
+
+def test_collision_benchmark_floors_keep_their_first_rows():
+    """The floors (``--floor``) keep the rows of their first tick while the robot
+    moves; the coal floor still runs coal's queries, the rows floor does not."""
+    spec = importlib.util.spec_from_file_location("bench_collision", COLLISION_BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    bench = module._bench_sot()
+    scene = bench.reach_scene("talos")
+    pool.clear()
+    try:
+        floors = {}
+        for i, kind in enumerate(("coal", "rows")):
+            c, f = module.build(bench, scene, True, f"floor{i}_")
+            module.frozenPass(f, kind == "coal")
+            floors[kind] = (c, f)
+        first = {}
+        for kind, (c, f) in floors.items():
+            c.device.increment(0.001)
+            first[kind] = (
+                f.error.value.copy(),
+                f.core._gdata.distanceResults[int(f.core.rowPairs[0])].min_distance,
+            )
+        for _ in range(40):  # the wrist moves, and the legs with the CoM
+            for c, _f in floors.values():
+                c.device.increment(0.001)
+        for kind, (_c, f) in floors.items():
+            rows, d0 = first[kind]
+            np.testing.assert_array_equal(f.error.value, rows)  # the first tick's rows
+            d = f.core._gdata.distanceResults[int(f.core.rowPairs[0])].min_distance
+            assert (d != d0) == (kind == "coal"), (kind, d, d0)
+    finally:
+        pool.clear()
 
 
 WORST_CASE_BENCH = BENCH.with_name("bench_worst_case.py")
