@@ -592,80 +592,138 @@ def test_a_running_loop_wakes_the_server_between_its_ticks():
     assert len(ticks) >= 3 and ticks == sorted(ticks) and ticks[-1] > ticks[0], ticks
 
 
-def test_what_the_control_does_not_need_is_recorded_after_the_tick():
-    """In a real-time run, a plotted signal that shares no step with the device's control
-    is computed in the loop's idle call, after the tick, from the same state (the same
-    values); what the control needs is recorded in the tick. Every row is published. In
-    ``step`` (no idle calls) everything is recorded in the tick, as before."""
+def _probes(robot, sot):
+    """Three probes on the UR5 graph, each output recording ``(tick, in a tick?)`` of
+    its calls: ``late.twice = 2 q`` (shares no step with the control), ``own.twice =
+    2 u`` (its own step over the control) and ``mixed.sum = u + q[:6]`` (its own step
+    over the control and the state the tick writes)."""
     from sotpy.graph import Entity, Input, Output
 
-    robot, _feature, _task, sot = ur5_reach()
     ticking = _flagTicks(robot.device)
-    calls: list[tuple[int, bool]] = []
+    calls: dict[str, list[tuple[int, bool]]] = {"late": [], "own": [], "mixed": []}
 
-    class LateProbe(Entity):
-        q = Input(VECTOR_T)
+    class Probe(Entity):
+        a = Input(VECTOR_T)
+        b = Input(VECTOR_T)
 
-        @Output(VECTOR_T, deps=("q",), withTime=True, timeDependent=True)
-        def twice(self, t, q):
-            calls.append((t, ticking[0]))
-            return 2.0 * q
+        @Output(VECTOR_T, deps=("a",), withTime=True, timeDependent=True)
+        def twice(self, t, a):
+            calls[self.name].append((t, ticking[0]))
+            return 2.0 * a
 
-    probe = LateProbe("late_probe")
-    plug(robot.device.state, probe.q)
-    loop = ControlLoop("loop", robot.device, 0.002)
+        @Output(VECTOR_T, deps=("a", "b"), withTime=True, timeDependent=True)
+        def sum(self, t, a, b):
+            calls[self.name].append((t, ticking[0]))
+            return a + b[: a.shape[0]]
+
+    late, own, mixed = Probe("late"), Probe("own"), Probe("mixed")
+    plug(robot.device.state, late.a)
+    plug(sot.control, own.a)
+    plug(sot.control, mixed.a)
+    plug(robot.device.state, mixed.b)
+    return late, own, mixed, calls
+
+
+def test_a_real_time_run_records_nothing_in_the_tick():
+    """In a real-time run the row of tick T is made by the loop's idle calls, from the
+    values the graph holds for T: the state and what shares no step with the control
+    after tick T - 1; the control's values, and the steps of their own over them, after
+    tick T. No probe runs in a tick, and each row is one tick's: its control moved its
+    state to the next row's (velocity control), and every probe is its function of the
+    row's values. ``step`` records the whole row in the tick, as before."""
+    robot, _feature, task, sot = ur5_reach()
+    late, own, _mixed, calls = _probes(robot, sot)
+    loop = ControlLoop("loop", robot.device, DT)
+    state, control = robot.device.state.path, sot.control.path
     with Dashboard(loop, rate=25.0) as ui:
-        ui.plot(probe.twice.path, sot.control.path, robot.device.state.path)
+        ui.plot(late.twice.path, own.twice.path, control, state, task.error.path)
+        rec = ui.recorder
+        hook = f"{rec.hook.path} (every 1)"
+        assert hook in robot.device.after.list()
+        loop.start()
+        time.sleep(0.3)
+        assert hook not in robot.device.after.list()  # no work in the tick, not even a call
+        loop.stop()
+        assert hook in robot.device.after.list()  # back for step
+        assert rec._sharedAfter and [c.signal for c in rec._late] == [late.twice]
+        assert {c.signal for c in rec._shared} == {own.twice, sot.control, task.error}
+        # every row published but the last, which waits for the next tick's control
+        assert rec.count == loop.ticks - 1 and rec._open is not None
+        assert calls["late"] and calls["own"]
+        assert not any(f for k in ("late", "own") for _, f in calls[k])  # none in a tick
+        loop.step(1)  # that tick's hook finishes the waiting row, then makes its own
+        assert rec._open is None and rec.count == loop.ticks
+        assert all(f for _, f in calls["own"][-2:])  # closing the row, then its own
+        data = ui.data()
+        q, u = data[state], data[control]
+        np.testing.assert_array_equal(data[late.twice.path], 2.0 * q)
+        np.testing.assert_array_equal(data[own.twice.path], 2.0 * u)
+        assert np.all(np.diff(data["tick"]) == 1)
+        for k in range(len(q) - 1):  # the row's control took the row's state to the next
+            np.testing.assert_allclose(q[k + 1], q[k] + DT * u[k], rtol=0, atol=1e-12)
+        # the task's error, computed after the tick from the features' cached values, is
+        # the error of the row's state (Pinocchio's forward kinematics, independently)
+        model = robot.model
+        data_pin = model.createData()
+        frame = model.getFrameId(robot.opPoints["end-effector"])
+        ref = np.array([0.3, 0.2, 0.4])
+        for k in range(0, len(q), 37):
+            pin.framesForwardKinematics(model, data_pin, q[k])
+            np.testing.assert_allclose(
+                data[task.error.path][k], data_pin.oMf[frame].translation - ref, atol=1e-12
+            )
+
+
+def test_a_step_over_the_state_keeps_the_control_values_in_the_tick():
+    """A plotted signal whose own step reads both the control and the state the tick
+    writes cannot be computed after the tick (it would read the next state): every
+    signal sharing a step with the control is then recorded in the tick, at the tick's
+    state, and what shares none after it. Rows stay consistent."""
+    robot, _feature, _task, sot = ur5_reach()
+    late, _own, mixed, calls = _probes(robot, sot)
+    loop = ControlLoop("loop", robot.device, DT)
+    state, control = robot.device.state.path, sot.control.path
+    with Dashboard(loop, rate=25.0) as ui:
+        ui.plot(mixed.sum.path, late.twice.path, control, state)
         loop.start()
         time.sleep(0.3)
         loop.stop()
         rec = ui.recorder
-        assert [c.signal for c in rec._late] == [probe.twice]
-        assert sot.control in [c.signal for c in rec._early]
-        assert rec.count == loop.ticks and rec._pending is None  # every row published
-        realtime = list(calls)
-        assert len(realtime) >= loop.ticks - 1 and not any(f for _, f in realtime)
+        assert not rec._sharedAfter
+        assert rec.count == loop.ticks and rec._open is None  # every row published
+        assert calls["mixed"] and all(f for _, f in calls["mixed"])  # in the tick
+        assert not any(f for _, f in calls["late"])  # after it
         data = ui.data()
-        np.testing.assert_array_equal(data[probe.twice.path], 2.0 * data[robot.device.state.path])
-        calls.clear()
-        loop.step(5)
-        assert len(calls) == 5 and all(f for _, f in calls)  # in the tick, as before
-        data = ui.data()
-        np.testing.assert_array_equal(data[probe.twice.path], 2.0 * data[robot.device.state.path])
+        q, u = data[state], data[control]
+        np.testing.assert_array_equal(data[mixed.sum.path], u + q[:, :6])
+        np.testing.assert_array_equal(data[late.twice.path], 2.0 * q)
 
 
 def test_a_row_whose_idle_call_did_not_come_is_not_filled_from_a_later_state():
-    """A row left waiting for its idle call (a tick's fault stops the loop before it)
-    gets NaN for the columns recorded after the tick when a later tick ran meanwhile,
-    never values of a later state under its tick."""
-    from sotpy.graph import Entity, Input, Output
-
-    class LateProbe2(Entity):
-        q = Input(VECTOR_T)
-
-        @Output(VECTOR_T, deps=("q",), withTime=True, timeDependent=True)
-        def twice(self, t, q):
-            return 2.0 * q
-
-    robot, _feature, _task, _sot = ur5_reach()
-    probe = LateProbe2("late_probe2")
-    plug(robot.device.state, probe.q)
-    loop = ControlLoop("loop", robot.device, 0.002)
+    """A row waiting for the values of its tick gets NaN for them when the graph no
+    longer holds them (the state moved on by more than that tick), never a later
+    tick's values under its tick."""
+    robot, _feature, _task, sot = ur5_reach()
+    _late, own, _mixed, _calls = _probes(robot, sot)
+    loop = ControlLoop("loop", robot.device, DT)
     with Dashboard(loop) as ui:
-        ui.plot(probe.twice.path, robot.device.state.path)
-        loop.step(2)
+        ui.plot(own.twice.path, robot.device.state.path)
+        loop.start()
+        time.sleep(0.1)
+        loop.stop()
         rec = ui.recorder
-        loop._inRealTime = True  # as inside a real-time run whose idle call never comes
-        try:
-            loop.step(1)  # (step does not call idle calls)
-            assert rec._pending is not None and rec.count == 2
-            loop.step(1)  # the next tick's hook finishes the waiting row first
-        finally:
-            loop._inRealTime = False
-        assert rec._pending is not None  # this tick's row waits in turn
-        rec.finishRow()  # same state: computed
+        i, t, part = rec._open
+        assert part == "shared"
+        with pool.lock:  # two ticks that the recorder does not see
+            robot.device.after.rmSignal(rec.hook)
+            robot.device.increment(DT)
+            robot.device.increment(DT)
+            robot.device.after.addSignal(rec.hook)
+        n = rec.count
+        with pool.lock:
+            rec._closeOpen()
+        assert rec.count == n + 1 and rec._ticks[i] == t
         data = ui.data()
-        twice, state = data[probe.twice.path], data[robot.device.state.path]
-        assert len(twice) == 4
-        np.testing.assert_array_equal(twice[[0, 1, 3]], 2.0 * state[[0, 1, 3]])
-        assert np.isnan(twice[2]).all() and not np.isnan(state[2]).any()
+        assert np.isnan(data[own.twice.path][-1]).all()
+        assert not np.isnan(data[robot.device.state.path][-1]).any()
+        assert not np.isnan(data[own.twice.path][:-1]).any()

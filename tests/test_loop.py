@@ -608,21 +608,23 @@ class LoopTestBusyFlag(LoopTestDevice):
 
 
 def test_idle_calls_run_between_ticks_of_real_time_runs_only(caplog):
+    """Idle calls follow every k-th tick of a real-time run, outside the tick, and once
+    more at the run's end (no longer in the run); ``step`` calls none."""
     dev = LoopTestBusyFlag("dev")
     dev.control.value = np.ones(1)
     loop = ControlLoop("loop", dev, 0.001)
-    seen: list[tuple[int, bool]] = []
+    seen: list[tuple[int, bool, bool]] = []
 
     def call():
-        seen.append((loop.ticks, dev.inTick))
+        seen.append((loop.ticks, dev.inTick, loop.inRealTimeRun))
 
     loop.addIdleCall(call, every=10)
     loop.addIdleCall(call, every=10)  # added twice: called once
     loop.start(ticks=60)
     assert loop.wait(5.0)
-    assert seen == [(n, False) for n in (10, 20, 30, 40, 50, 60)]
+    assert seen == [(n, False, True) for n in (10, 20, 30, 40, 50, 60)] + [(60, False, False)]
     loop.step(20)  # not a real-time run: no idle call
-    assert len(seen) == 6
+    assert len(seen) == 7
 
     def broken():
         raise RuntimeError("boom")
@@ -633,11 +635,11 @@ def test_idle_calls_run_between_ticks_of_real_time_runs_only(caplog):
         assert loop.wait(5.0)
     assert loop.ticks == 20 and loop.fault is None  # the loop went on without it
     assert "idle call" in caplog.text and "removed" in caplog.text
-    assert seen[-1] == (20, False)
+    assert seen[-2:] == [(20, False, True), (20, False, False)]
     loop.rmIdleCall(call)
     loop.rmIdleCall(call)  # not called any more: nothing
     loop.start(ticks=10)
-    assert loop.wait(5.0) and seen[-1] == (20, False)
+    assert loop.wait(5.0) and seen[-1] == (20, False, False)
     with pytest.raises(LoopError, match=r"addIdleCall: every must be an integer >= 1"):
         loop.addIdleCall(call, every=0)
     with pytest.raises(LoopError, match="expected a callable"):

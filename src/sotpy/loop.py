@@ -483,7 +483,8 @@ class ControlLoop(Entity):
     def addIdleCall(self, fn: Callable[[], None], every: int = 1) -> None:
         """Call ``fn()`` in the loop's thread after every ``every``-th tick of a real-time
         run (``start``, ``run``), once the tick is over and counted: outside its tick time,
-        in the slack before the next deadline, between two ticks.
+        in the slack before the next deadline, between two ticks; and once more when the
+        run ends, after its last tick (:attr:`inRealTimeRun` is then False).
 
         For what must not run during a tick: a thread of this process that shares the
         GIL with the loop (a dashboard's server) asks to be woken there, so that its
@@ -723,6 +724,8 @@ class ControlLoop(Entity):
                 return self._ticks(ticks, realtime)
         finally:
             self._inRealTime = False
+            if self._idleCalls:
+                self._callIdle(final=True)
 
     def _ticks(self, ticks: int | None, realtime: bool) -> BaseException | None:
         lock = pool.lock
@@ -780,10 +783,10 @@ class ControlLoop(Entity):
                 self._callIdle()
         return None
 
-    def _callIdle(self) -> None:
+    def _callIdle(self, final: bool = False) -> None:
         n = self._stats.count
         for fn, every in self._idleCalls:
-            if n % every == 0:
+            if final or n % every == 0:
                 try:
                     fn()
                 except Exception:  # never stop the loop for it

@@ -462,6 +462,12 @@ class _Owner:
         self.name = name
 
 
+def _readsWritten(step: OutputSignal) -> bool:
+    """Whether ``step`` reads, directly, a signal its entity writes at each tick (a
+    device's state): computed after the tick, it would see the next tick's value."""
+    return any(getattr(d._holder(), "_volatile", False) for d in step._srcs)
+
+
 class _Column:
     __slots__ = ("convert", "data", "error", "first", "holder", "plain", "signal")
 
@@ -487,12 +493,24 @@ class Recorder:
     tick writes a row, then publishes it by moving the row count).
 
     **After the tick.** With :attr:`loop` set (a dashboard sets it and registers
-    :meth:`finishRow` as the loop's idle call), a real-time run records in the tick only
-    the signals whose computation shares a step with the device's control. The others
-    (a task's error that the SOT's fused rows never evaluate, a probe on the state) are
-    computed by :meth:`finishRow` right after the tick, holding ``pool.lock``, from the
-    same state and at the same tick: the same values, outside the tick's time. The row is
-    published then. ``step`` (no idle calls) records everything in the tick.
+    :meth:`finishRow` as the loop's idle call), a real-time run records nothing in the
+    tick. The loop calls :meth:`finishRow` right after each tick, holding ``pool.lock``,
+    and the row of tick ``T`` is made in two idle calls:
+
+    * after tick ``T - 1`` (the state of ``T`` written): the signals of no step (the
+      state, a constant) are copied, and those that share no step with the device's
+      control (a task's error that the SOT's fused rows never evaluate, a probe on the
+      state) are computed at ``T``, from that state;
+    * after tick ``T`` (its control computed): the signals that share a step with the
+      control are copied from what the tick computed, and their own steps (a task's
+      error over the features the control evaluated) are computed at ``T`` from the
+      values the tick cached. The row is published then, one tick later.
+
+    Every value is the one a read at ``T`` would give, and no step of a tick is computed
+    outside it. When a shared signal's own steps read the state directly (they would see
+    the next tick's), every shared signal is recorded in the tick instead: the device's
+    ``after`` list runs them at ``T`` (the next tick's control computed then, and not
+    again). ``step`` (no idle calls) records the whole row in the tick.
 
     ``data()`` and ``save()`` give the rows in the tracer's forms (``Tracer.data``,
     ``Tracer.dump``: ``.npz``, ``.csv``; ``saveFiles``: SoT's one text file per signal).
@@ -513,55 +531,101 @@ class Recorder:
         self._active: tuple[_Column, ...] = ()
         self._holders = -1  # the pool's version when each column's holder was found
         self.loop: Any = None  # the ControlLoop whose idle call finishes the rows
-        self._pending: tuple[int, int] | None = None  # (row, tick) waiting for finishRow
-        self._classified = -1  # the pool's version when early and late were decided
-        self._early: tuple[_Column, ...] = ()
-        self._late: tuple[_Column, ...] = ()
-        self._earlyPlan: Plan | None = None
+        # the row begun and not yet published: (index, tick, the part it waits for:
+        # "shared" after the next tick, "late" after this one)
+        self._open: tuple[int, int, str] | None = None
+        self._classified = -1  # the pool's version when the columns were grouped
+        self._written: tuple[_Column, ...] = ()  # of no step: copied
+        self._shared: tuple[_Column, ...] = ()  # sharing a step with the control
+        self._late: tuple[_Column, ...] = ()  # sharing none
+        self._sharedAfter = False  # shared columns after the tick (else in it)
+        self._sharedPlan: Plan | None = None
         self._latePlan: Plan | None = None
         self.hook = OutputSignal(
             _Owner(name), "record", INT, self._record, withTime=True, timeDependent=True,
             doc="rows recorded by the dashboard",
         )  # fmt: skip
         self._attached = False
+        self._hooked = False  # the hook is in the device's after list
 
     # -- the tick's side ------------------------------------------------------------
     def _record(self, t: int) -> int:
-        if self._pending is not None:  # the last row's idle call did not come (a fault)
-            self.finishRow()
+        """The hook, at the end of the tick that wrote the state of ``t``."""
         if self._classified != pool.version:
             self._classify()
-        i = self._count % self.size
-        self._ticks[i] = t
-        self._store(self._earlyPlan, self._early, i, t)
         loop = self.loop
-        if self._late and loop is not None and loop.inRealTimeRun:
-            self._pending = (i, t)  # the rest after the tick, in the loop's idle call
+        if loop is not None and loop.inRealTimeRun:
+            if not self._sharedAfter:  # shared columns in the tick, the late ones after
+                self._closeOpen()
+                i = self._begin(t)
+                self._store(self._sharedPlan, self._shared, i, t)
+                self._open = (i, t, "late")
             return self._count
+        # step (no idle calls): the whole row now
+        self._closeOpen()
+        i = self._begin(t)
+        self._store(self._sharedPlan, self._shared, i, t)
         self._store(self._latePlan, self._late, i, t)
         self._count += 1  # publishes the row
         return self._count
 
-    def finishRow(self) -> None:
-        """Record the row's columns the control does not need, and publish the row. The
-        loop's idle call, between two ticks (see :class:`Recorder`); the next tick's hook
-        when the idle call did not come."""
-        if self._pending is None:
+    def _begin(self, t: int) -> int:
+        """Begin the row of tick ``t`` (its tick, its copied columns); its index."""
+        i = self._count % self.size
+        self._ticks[i] = t
+        self._store(None, self._written, i, t)
+        return i
+
+    def _closeOpen(self) -> None:
+        """Finish and publish the row begun and not published, if any: the part it waits
+        for is computed when the graph still holds that tick's values (``"shared"``: its
+        tick just ran; ``"late"``: no tick ran since), else left NaN (a fault, a stop:
+        never a later tick's values under its tick)."""
+        if self._open is None:
             return
+        i, t, part = self._open
+        self._open = None
+        state = getattr(self.device, "state", None)
+        now = getattr(state, "time", t + 1 if part == "shared" else t)
+        if part == "shared":
+            plan, columns, ok = self._sharedPlan, self._shared, now == t + 1
+        else:
+            plan, columns, ok = self._latePlan, self._late, now == t
+        if ok:
+            self._store(plan, columns, i, t)
+        else:
+            for c in columns:
+                if c.data is not None:
+                    c.data[i] = np.nan
+        self._count += 1  # publishes the row
+
+    def finishRow(self) -> None:
+        """The loop's idle call, between two ticks of a real-time run (see
+        :class:`Recorder`): finish and publish the waiting row, and begin the next one
+        (when the shared signals are recorded after the tick). While it makes the rows,
+        the hook is out of the device's ``after`` list (it would have nothing to do in
+        the tick); the call at the run's end puts it back, for ``step``."""
         with pool.lock:  # as a tick: no edit seen half done
-            pending = self._pending
-            if pending is None:
+            loop = self.loop
+            if loop is None or not loop.inRealTimeRun:  # the run ended: ticks may follow
+                self._hook(True)  # without idle calls (the waiting row: the next hook)
                 return
-            i, t = pending
+            if self._classified != pool.version:
+                self._classify()
+            self._closeOpen()
+            self._hook(not self._sharedAfter)
+            if not self._sharedAfter:
+                return
             state = getattr(self.device, "state", None)
-            if getattr(state, "time", t) == t:  # the state the row's tick left
-                self._store(self._latePlan, self._late, i, t)
-            else:  # a tick ran since (its idle call did not come): not a later state's
-                for c in self._late:  # values under this tick: not recorded
-                    if c.data is not None:
-                        c.data[i] = np.nan
-            self._pending = None
-            self._count += 1  # publishes the row
+            t = getattr(state, "time", None)
+            if not isinstance(t, int) or t < 0:
+                return
+            last = self._count - 1
+            if last >= 0 and self._ticks[last % self.size] >= t:
+                return  # this tick's row was made (in the tick, before an edit moved the split)
+            i = self._begin(t)
+            self._store(self._latePlan, self._late, i, t)
+            self._open = (i, t, "shared")
 
     def _store(self, plan: Plan | None, columns: tuple[_Column, ...], i: int, t: int) -> None:
         """Bring ``columns`` up to date at ``t`` (``plan``: their compiled steps) and copy
@@ -616,36 +680,52 @@ class Recorder:
         self._classified = -1
 
     def _classify(self) -> None:
-        """The recorded signals' compiled :class:`~sotpy.graph.Plan` s: their values at
-        the next tick are computed by the same kind of steps as the tick's own plan (the
-        SOT's fused rows), and a value the next tick needs is then not computed again.
-        Two plans, splitting the columns: those whose computation shares a step with the
-        device's control (``early``: recorded in the tick, where the control needs the
-        same values) and, with a :attr:`loop`, those that share none (``late``: recorded
-        after the tick by :meth:`finishRow`, from the same state: the same values, off
-        the tick's time). A column of no step (a state, a constant) is early: a copy."""
+        """Group the columns and make their compiled :class:`~sotpy.graph.Plan` s (the
+        tick's kind of steps, the SOT's fused rows: a value the control computes is not
+        computed again): ``written`` (no step: a copy), ``shared`` (a step in common
+        with the device's control) and ``late`` (none); and whether the shared ones are
+        recorded after the tick (see :class:`Recorder`): with a :attr:`loop`, unless one
+        of their own steps reads a signal the tick writes (the state)."""
         self._classified = pool.version
-        early, late = list(self._active), []
+        written, shared, late = [], [], []
         control = getattr(self.device, "control", None)
+        used: set[int] | None = None
         if self.loop is not None and control is not None:
             try:
                 used = {id(s) for s in compilePlan([control]).steps}
             except Exception:  # an unplugged control: no split (the tick will say why)
                 used = None
-            if used is not None:
-                early = []
-                for c in self._active:
-                    try:
-                        steps = compilePlan([c.signal]).steps if c.error is None else []
-                    except Exception:  # its read in the tick says why
-                        steps = []
-                    isLate = bool(steps) and not any(id(s) in used for s in steps)
-                    (late if isLate else early).append(c)
-        self._early, self._late = tuple(early), tuple(late)
-        sinks = [c.signal for c in early if c.error is None]
-        self._earlyPlan = Plan(sinks) if sinks else None
+        after = used is not None
+        for c in self._active:
+            try:
+                steps = compilePlan([c.signal]).steps if c.error is None else []
+            except Exception:  # its read in the tick says why
+                steps = []
+            if not steps:
+                written.append(c)
+            elif used is None or any(id(s) in used for s in steps):
+                shared.append(c)
+                own = [s for s in steps if used is None or id(s) not in used]
+                if any(_readsWritten(s) for s in own):
+                    after = False
+            else:
+                late.append(c)
+        self._written, self._shared, self._late = tuple(written), tuple(shared), tuple(late)
+        self._sharedAfter = after
+        sinks = [c.signal for c in shared if c.error is None]
+        self._sharedPlan = Plan(sinks) if sinks else None
         sinks = [c.signal for c in late if c.error is None]
         self._latePlan = Plan(sinks) if sinks else None
+
+    def _hook(self, on: bool) -> None:
+        """Put the hook in the device's ``after`` list or take it out (attached only;
+        holding ``pool.lock``)."""
+        if self._attached and on != self._hooked:
+            if on:
+                self.device.after.addSignal(self.hook)
+            else:
+                self.device.after.rmSignal(self.hook, missing_ok=True)
+            self._hooked = on
 
     # -- configuration (server threads, holding pool.lock) ------------------------
     def attach(self) -> None:
@@ -657,15 +737,15 @@ class Recorder:
             )
         with pool.lock:
             after.addSignal(self.hook)
-        self._attached = True
+            self._attached = self._hooked = True
 
     def detach(self) -> None:
         """Take the hook out of the device's ``after`` list."""
         if self._attached:
             with pool.lock:
-                self.device.after.rmSignal(self.hook, missing_ok=True)
-                self.finishRow()  # a row left waiting for an idle call
-            self._attached = False
+                self._hook(False)
+                self._closeOpen()  # a row left waiting for an idle call
+                self._attached = False
 
     def add(self, path: str) -> None:
         """Record the signal at ``path`` (``entity.signal``) from the next tick on."""
