@@ -699,6 +699,44 @@ def test_a_step_over_the_state_keeps_the_control_values_in_the_tick():
         np.testing.assert_array_equal(data[late.twice.path], 2.0 * q)
 
 
+def test_the_split_follows_the_plots_while_the_loop_runs():
+    """Plotting, then removing, a signal whose own step reads the state while the loop
+    runs moves the control's plots into the tick and back out: the rows stay each one
+    tick's (increasing ticks, each row's control taking its state to the next row's,
+    each probe its function of its row), none duplicated and none with a hole."""
+    robot, _feature, _task, sot = ur5_reach()
+    _late, own, mixed, calls = _probes(robot, sot)
+    loop = ControlLoop("loop", robot.device, DT)
+    state, control = robot.device.state.path, sot.control.path
+    with Dashboard(loop, rate=25.0) as ui:
+        rec = ui.recorder
+        ui.plot(own.twice.path, control, state)
+        loop.start()
+        time.sleep(0.15)
+        ui.plot(mixed.sum.path)
+        time.sleep(0.15)
+        inTick = rec._sharedAfter
+        mixedRows = ui.data()[mixed.sum.path]
+        rec.remove(mixed.sum.path)
+        time.sleep(0.15)
+        loop.stop()
+        assert inTick is False and rec._sharedAfter
+        assert calls["mixed"] and all(f for _, f in calls["mixed"])  # in the tick
+        loop.step(1)  # the waiting row
+        data = ui.data()
+    ticks = data["tick"]
+    assert len(ticks) > 20 and np.all(np.diff(ticks) >= 1)  # increasing, none twice
+    q, u, twice = data[state], data[control], data[own.twice.path]
+    assert not np.isnan(q).any() and not np.isnan(u).any() and not np.isnan(twice).any()
+    np.testing.assert_array_equal(twice, 2.0 * u)
+    for k in np.flatnonzero(np.diff(ticks) == 1):
+        np.testing.assert_allclose(q[k + 1], q[k] + DT * u[k], rtol=0, atol=1e-12)
+    recorded = ~np.isnan(mixedRows).all(axis=1)
+    assert recorded.sum() > 5
+    n = len(mixedRows)
+    np.testing.assert_array_equal(mixedRows[recorded], (u[:n] + q[:n, :6])[recorded])
+
+
 def test_a_row_whose_idle_call_did_not_come_is_not_filled_from_a_later_state():
     """A row waiting for the values of its tick gets NaN for them when the graph no
     longer holds them (the state moved on by more than that tick), never a later
@@ -712,7 +750,7 @@ def test_a_row_whose_idle_call_did_not_come_is_not_filled_from_a_later_state():
         time.sleep(0.1)
         loop.stop()
         rec = ui.recorder
-        i, t, part = rec._open
+        i, t, part, *_ = rec._open
         assert part == "shared"
         with pool.lock:  # two ticks that the recorder does not see
             robot.device.after.rmSignal(rec.hook)

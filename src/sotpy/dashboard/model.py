@@ -532,8 +532,9 @@ class Recorder:
         self._holders = -1  # the pool's version when each column's holder was found
         self.loop: Any = None  # the ControlLoop whose idle call finishes the rows
         # the row begun and not yet published: (index, tick, the part it waits for:
-        # "shared" after the next tick, "late" after this one)
-        self._open: tuple[int, int, str] | None = None
+        # "shared" after the next tick, "late" after this one, and that part's plan and
+        # columns as they were when the row began: a plot added since waits for the next)
+        self._open: tuple[int, int, str, Plan | None, tuple[_Column, ...]] | None = None
         self._classified = -1  # the pool's version when the columns were grouped
         self._written: tuple[_Column, ...] = ()  # of no step: copied
         self._shared: tuple[_Column, ...] = ()  # sharing a step with the control
@@ -559,7 +560,7 @@ class Recorder:
                 self._closeOpen()
                 i = self._begin(t)
                 self._store(self._sharedPlan, self._shared, i, t)
-                self._open = (i, t, "late")
+                self._open = (i, t, "late", self._latePlan, self._late)
             return self._count
         # step (no idle calls): the whole row now
         self._closeOpen()
@@ -583,14 +584,11 @@ class Recorder:
         never a later tick's values under its tick)."""
         if self._open is None:
             return
-        i, t, part = self._open
+        i, t, part, plan, columns = self._open
         self._open = None
         state = getattr(self.device, "state", None)
         now = getattr(state, "time", t + 1 if part == "shared" else t)
-        if part == "shared":
-            plan, columns, ok = self._sharedPlan, self._shared, now == t + 1
-        else:
-            plan, columns, ok = self._latePlan, self._late, now == t
+        ok = now == (t + 1 if part == "shared" else t)
         if ok:
             self._store(plan, columns, i, t)
         else:
@@ -625,7 +623,7 @@ class Recorder:
                 return  # this tick's row was made (in the tick, before an edit moved the split)
             i = self._begin(t)
             self._store(self._latePlan, self._late, i, t)
-            self._open = (i, t, "shared")
+            self._open = (i, t, "shared", self._sharedPlan, self._shared)
 
     def _store(self, plan: Plan | None, columns: tuple[_Column, ...], i: int, t: int) -> None:
         """Bring ``columns`` up to date at ``t`` (``plan``: their compiled steps) and copy
