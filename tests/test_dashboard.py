@@ -699,6 +699,18 @@ def test_a_step_over_the_state_keeps_the_control_values_in_the_tick():
         np.testing.assert_array_equal(data[late.twice.path], 2.0 * q)
 
 
+@pytest.mark.parametrize(
+    ("cpus", "why"),
+    [([], "non-empty"), ([True], "CPU numbers"), ([0, 10_000], "not CPUs of this machine")],
+)
+def test_a_headless_page_refuses_cpus_that_are_not_the_machines(cpus, why):
+    """Checked as a loop's CPUs are, before any browser starts (no Chromium needed)."""
+    from sotpy.dashboard.browser import HeadlessPage
+
+    with pytest.raises(SotpyError, match=why):
+        HeadlessPage("http://127.0.0.1:1/", cpus=cpus)
+
+
 def test_the_split_follows_the_plots_while_the_loop_runs():
     """Plotting, then removing, a signal whose own step reads the state while the loop
     runs moves the control's plots into the tick and back out: the rows stay each one

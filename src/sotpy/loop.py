@@ -488,8 +488,10 @@ class ControlLoop(Entity):
 
         For what must not run during a tick: a thread of this process that shares the
         GIL with the loop (a dashboard's server) asks to be woken there, so that its
-        Python runs while the loop waits. ``fn`` must be short (a few us: hand the work
-        to another thread) and must not raise; one that raises is logged and removed."""
+        Python runs while the loop waits; a dashboard's recorder makes its rows there.
+        ``fn`` must be short (tens of us at most, or hand the work to another thread: work
+        on the loop's CPU between two ticks still slows the next one a little, its
+        caches) and must not raise; one that raises is logged and removed."""
         if not callable(fn):
             raise LoopError(f"{self._who('addIdleCall')}: expected a callable, got {fn!r}")
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:

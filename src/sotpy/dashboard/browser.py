@@ -19,17 +19,18 @@ from __future__ import annotations
 import base64
 import contextlib
 import fcntl
-import numbers
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from ..errors import SotpyError
+from ..loop import _checkedCpus
 from ..viewer import _TRAMPOLINE, CHROMIUM_FLAGS, _Devtools, _endSession, _log, findChromium
 
 __all__ = ["HeadlessPage"]
@@ -48,20 +49,11 @@ class HeadlessPage:
         width: int = 1600,
         height: int = 1000,
         timeout: float = 120.0,
-        cpus: frozenset[int] | set[int] | None = None,
+        cpus: Iterable[int] | None = None,
     ):
-        if cpus is not None and not (
-            cpus and all(isinstance(c, numbers.Integral) and not isinstance(c, bool) for c in cpus)
-        ):
-            raise SotpyError(
-                f"HeadlessPage: cpus must be a non-empty set of CPU numbers, got {cpus!r}"
-            )
+        cpus = _checkedCpus("HeadlessPage", cpus)  # as a loop's: CPUs of this machine
         # the CPUs are set before Chromium starts: every process it starts inherits them
-        pin = (
-            ""
-            if cpus is None
-            else f"import os; os.sched_setaffinity(0, {sorted(map(int, cpus))}); "
-        )
+        pin = "" if cpus is None else f"import os; os.sched_setaffinity(0, {sorted(cpus)}); "
         exe = findChromium()
         if exe is None:
             raise SotpyError(

@@ -28,8 +28,9 @@ run on the CPUs it leaves (``Dashboard.cpus``), and so does a browser started wi
 :class:`~sotpy.dashboard.browser.HeadlessPage` given those CPUs: their work then does
 not evict the tick's data from the loop's CPU while it sleeps between ticks.
 
-**The loop never waits for the page.** The plotted signals are recorded in the tick by
-the :class:`~sotpy.dashboard.model.Recorder` (a few us a signal); the server reads the
+**The loop never waits for the page.** The plotted signals are recorded between two
+ticks by the :class:`~sotpy.dashboard.model.Recorder` (the loop's idle call, a few us a
+signal; in the tick under ``step``); the server reads the
 new rows without a lock and sends each page at most ``rate`` frames a second; while a
 page has not taken the previous frame (a slow or frozen browser), its frames are
 skipped and the rows wait in the ring (``seconds`` long): the page loses frames, never
@@ -218,7 +219,7 @@ class Dashboard:
         _switchInterval(+1)
         if callable(getattr(loop, "addIdleCall", None)):  # frames between the loop's ticks
             loop.addIdleCall(self._loopWakes, max(1, round(1.0 / (self.rate * dt))))
-            if self.recorder is not None:  # what the control does not need, after the tick
+            if self.recorder is not None:  # the recorder's rows, between two ticks
                 self.recorder.loop = loop
                 loop.addIdleCall(self.recorder.finishRow)
         self._thread = threading.Thread(target=self._serve, name=f"{who} server", daemon=True)
