@@ -57,6 +57,15 @@ def test_page_graph_plot_edit_refusal(tmp_path):
         time.sleep(1.0)
         last = page.evaluate("sotpyDashboard.x[sotpyDashboard.x.length - 1]")
         assert last > first + 0.3  # simulated seconds advance with the loop (100 Hz)
+        # the plot draws at the display's frames what arrived: once a display frame at
+        # most, its last drawn time that of the rows (a frame or two behind at most)
+        xs, drawn, draws, frames = page.evaluate(
+            "(() => { const S = sotpyDashboard, u = S.plots.find((q) => q.u).u;"
+            " return [S.x[S.x.length - 1], u.data[0][u.data[0].length - 1], S.draws,"
+            " S.frames]; })()"
+        )
+        assert 0 <= xs - drawn <= 0.2, (xs, drawn)
+        assert 0 < draws <= frames, (draws, frames)
         lines = page.evaluate("document.querySelectorAll('.plot .u-series').length")
         assert lines == 1 + 3  # time + the three components selected by "111000"
         y = page.evaluate(

@@ -10,7 +10,7 @@ const S = {
   status: null, open: new Set(), selected: null,
   plots: [], target: null, nextSid: 1, nextPlot: 1,
   x: [], cols: new Map(), maxRows: 10000, paused: false, windowS: 5,
-  frames: 0, rowsSeen: 0,
+  frames: 0, rowsSeen: 0, draws: 0,
 };
 window.sotpyDashboard = S; // for tests and the console
 
@@ -491,7 +491,16 @@ function onFrame(buf) {
   const extra = S.x.length - S.maxRows;
   if (extra > 0) { S.x.splice(0, extra); for (const cols of S.cols.values()) for (const c of cols) c.splice(0, extra); }
   S.frames++; S.rowsSeen += n;
-  if (!S.paused) redraw();
+  if (!S.paused) drawSoon();
+}
+
+// The plots are drawn at the browser's next display frame, once for however many frames
+// arrived since: a hidden tab (no display frames) stores the rows and draws nothing.
+let drawPending = false;
+function drawSoon() {
+  if (drawPending) return;
+  drawPending = true;
+  requestAnimationFrame(() => { drawPending = false; S.draws++; if (!S.paused) redraw(); });
 }
 
 function redraw() {
