@@ -32,10 +32,20 @@ and their ratios with over without (and the ratio of medians of each round's two
 phases); the frames the page received per second and those skipped.
 Target (issue 22): median +5 % at most, p99 +10 % at most.
 
+``--parts`` measures instead each part of that cost on its own, in short real-time
+phases of the loop alternating in one process, each over the same round's loop alone:
+computing after each tick (15 us that touch no memory), writing 512 KB after each tick,
+the dashboard's recorder alone, a dashboard whose 5 plots a client reads, and the same
+serving code (rows read from a ring in shared memory, sent 30 times a second to a reader
+process) run in a thread of the loop's process or in a process of its own. It tells
+what costs the loop a tick (BENCHMARKS.md, "What a dashboard costs the loop, part by
+part").
+
 Usage::
 
     python benchmarks/bench_dashboard.py                # 3 rounds of 8 s each
     python benchmarks/bench_dashboard.py --quick        # 1 round of 2 s, a smoke check
+    python benchmarks/bench_dashboard.py --parts --rounds 12 --seconds 1.5
 """
 
 from __future__ import annotations
@@ -47,8 +57,11 @@ import os
 os.environ.setdefault("SOTPY_JIT", "wait")
 
 import argparse
+import contextlib
 import sys
 import time
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -126,31 +139,43 @@ asyncio.run(main())
 """
 
 
-def _client(loop, seconds: float, p: str) -> tuple[np.ndarray, float]:
-    """The loop with the dashboard, its 5 plots read by a client in another process."""
+@contextlib.contextmanager
+def _reader(url: str, port: int, series: list) -> Iterator[None]:
+    """A websocket client in another process that plots ``series`` on the dashboard at
+    ``url`` and reads its frames, drawing nothing (the page's traffic without a
+    browser's CPU); entered once it has read 10 frames (a loop must be ticking)."""
     import json
     import subprocess
 
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _CLIENT, url, str(port), json.dumps(series)],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout.readline().strip() == "streaming"
+        yield
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def _client(loop, seconds: float, p: str) -> tuple[np.ndarray, float]:
+    """The loop with the dashboard, its 5 plots read by a client in another process."""
     from sotpy.dashboard import Dashboard
 
     ui = Dashboard(loop, seconds=5.0)
     series = [(sig.format(p=p), comps) for sig, comps in PLOTS]
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _CLIENT, ui.url(), str(ui.port), json.dumps(series)],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-    )  # fmt: skip
     try:
         loop.start()
-        assert proc.stdout.readline().strip() == "streaming"
-        loop.stop()
-        f0 = sum(f for f, _ in ui.frameCounts())
-        t0 = time.monotonic()
-        ticks = _phase(loop, seconds)
-        rate = (sum(f for f, _ in ui.frameCounts()) - f0) / (time.monotonic() - t0)
-        return ticks, rate
+        with _reader(ui.url(), ui.port, series):
+            loop.stop()
+            f0 = sum(f for f, _ in ui.frameCounts())
+            t0 = time.monotonic()
+            ticks = _phase(loop, seconds)
+            rate = (sum(f for f, _ in ui.frameCounts()) - f0) / (time.monotonic() - t0)
+            return ticks, rate
     finally:
-        proc.kill()
-        proc.wait()
+        loop.stop()
         ui.close()
 
 
@@ -184,6 +209,227 @@ def _elsewhere(loop, seconds: float) -> np.ndarray:
         proc.wait()
 
 
+# -- --parts: where the cost comes from ------------------------------------------------
+@contextlib.contextmanager
+def _idleCall(loop, fn: Callable[[], None]) -> Iterator[None]:
+    loop.addIdleCall(fn)
+    try:
+        yield
+    finally:
+        loop.rmIdleCall(fn)
+
+
+def _busy() -> Callable[[], None]:
+    """15 us of computing that touches no memory (a clock read in a loop)."""
+
+    def fn() -> None:
+        end = time.perf_counter_ns() + 15_000
+        while time.perf_counter_ns() < end:
+            pass
+
+    return fn
+
+
+def _memory() -> Callable[[], None]:
+    """Writing 512 KB (about as long as ``_busy``, 13-15 us here)."""
+    block = np.zeros(1 << 16)
+
+    def fn() -> None:
+        block[:] += 1.0
+
+    return fn
+
+
+@contextlib.contextmanager
+def _recording(loop, series: list) -> Iterator[Any]:
+    """A :class:`~sotpy.dashboard.model.Recorder` of ``series``, rows made by the loop's
+    idle call as a dashboard's are (no server)."""
+    from sotpy.dashboard.model import Recorder
+
+    rec = Recorder("bench_rec", loop.device, 5.0, loop.dt)
+    for path, _ in series:
+        rec.add(path)
+    rec.loop = loop
+    rec.attach()
+    try:
+        with _idleCall(loop, rec.finishRow):
+            yield rec
+    finally:
+        rec.detach()
+
+
+@contextlib.contextmanager
+def _served(loop, series: list) -> Iterator[None]:
+    """A dashboard on the loop, ``series`` plotted by a client in another process."""
+    from sotpy.dashboard import Dashboard
+
+    ui = Dashboard(loop, seconds=5.0)
+    try:
+        loop.start()
+        with _reader(ui.url(), ui.port, series):
+            loop.stop()
+            yield
+    finally:
+        loop.stop()
+        ui.close()
+
+
+# The same serving code in a thread of the loop's process or in a process of its own:
+# every 1/30 s, the rows written since the last frame (3 components of each plotted
+# signal) are read from a ring in shared memory and sent to a reader process.
+_SERVE = r"""
+import os, socket, time
+from multiprocessing import shared_memory
+import numpy as np
+
+def serve(names, widths, size, port, cpus, stop):
+    os.sched_setaffinity(0, cpus)
+    shms = [shared_memory.SharedMemory(name=n) for n in names]
+    count = np.ndarray((1,), np.int64, buffer=shms[0].buf)
+    cols = [np.ndarray((size, w), np.float64, buffer=m.buf) for m, w in zip(shms[1:], widths)]
+    sock = socket.create_connection(("127.0.0.1", port))
+    last = int(count[0])
+    while not stop():
+        time.sleep(1 / 30)
+        n = int(count[0])
+        if n > last:
+            rows = np.arange(last, n) % size
+            frame = np.concatenate([c[rows, :3].ravel() for c in cols]).tobytes()
+            sock.sendall(len(frame).to_bytes(4, "little") + frame)
+            last = n
+    sock.close()
+    del count, cols
+    for m in shms:
+        m.close()
+"""
+
+_SERVE_PROCESS = (
+    _SERVE
+    + r"""
+import json, sys
+from multiprocessing import resource_tracker
+resource_tracker.register = lambda *a, **k: None  # the loop's process owns the memory
+a = json.loads(sys.argv[1])
+serve(a["names"], a["widths"], a["size"], a["port"], set(a["cpus"]), lambda: False)
+"""
+)
+
+_SINK = r"""
+import os, socket, sys
+os.sched_setaffinity(0, set(map(int, sys.argv[1].split(","))))
+server = socket.socket()
+server.bind(("127.0.0.1", 0))
+server.listen(1)
+print(server.getsockname()[1], flush=True)
+conn, _ = server.accept()
+while conn.recv(1 << 16):
+    pass
+"""
+
+
+@contextlib.contextmanager
+def _ringServed(loop, series: list, where: str) -> Iterator[None]:
+    """The recorder of ``series`` with its columns in shared memory (the row count
+    published after each tick), served by :data:`_SERVE` in a ``"thread"`` of this
+    process or a ``"process"`` of its own, to a reader process that discards the
+    frames."""
+    import json
+    import subprocess
+    import threading
+    from multiprocessing import shared_memory
+
+    cpus = sorted(loop.otherCpus() or os.sched_getaffinity(0))
+    with _recording(loop, series) as rec:
+        loop.step(2)  # (under step, rows in the tick) the columns get their widths
+        cols = [rec._columns[path] for path, _ in series]
+        widths = [c.data.shape[1] for c in cols]
+        shms = [shared_memory.SharedMemory(create=True, size=8)] + [
+            shared_memory.SharedMemory(create=True, size=rec.size * w * 8) for w in widths
+        ]
+        count = [np.ndarray((1,), np.int64, buffer=shms[0].buf)]  # views, dropped at the end
+        for c, m in zip(cols, shms[1:], strict=True):
+            ring = np.ndarray(c.data.shape, np.float64, buffer=m.buf)
+            ring[:] = c.data
+            c.data = ring
+        del ring
+
+        def publish() -> None:
+            count[0][0] = rec._count
+
+        sink = subprocess.Popen(
+            [sys.executable, "-c", _SINK, ",".join(map(str, cpus))],
+            stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        stop = threading.Event()
+        thread = server = None
+        try:
+            port = int(sink.stdout.readline())
+            names = [m.name for m in shms]
+            if where == "thread":
+                scope: dict = {}
+                exec(_SERVE, scope)
+                thread = threading.Thread(
+                    target=scope["serve"],
+                    args=(names, widths, rec.size, port, set(cpus), stop.is_set),
+                    daemon=True,
+                )
+                thread.start()
+            else:
+                args = {"names": names, "widths": widths, "size": rec.size, "port": port}
+                args["cpus"] = cpus
+                server = subprocess.Popen([sys.executable, "-c", _SERVE_PROCESS, json.dumps(args)])
+            with _idleCall(loop, publish):
+                yield
+        finally:
+            stop.set()
+            if thread is not None:
+                thread.join()
+            for proc in (server, sink):
+                if proc is not None:
+                    proc.kill()
+                    proc.wait()
+            for c in cols:
+                c.data = None
+            count.clear()
+            for m in shms:
+                m.close()
+                m.unlink()
+
+
+def parts(loop, p: str, rounds: int, seconds: float) -> None:
+    """Each part of a dashboard's cost on its own: real-time phases of ``seconds``, in
+    one process, every kind once a round (the order reversed every other round), each
+    phase's median tick over the same round's loop alone."""
+    series = [(sig.format(p=p), comps) for sig, comps in PLOTS]
+    kinds: list[tuple[str, Callable[[], contextlib.AbstractContextManager[None]]]] = [
+        ("the loop alone", contextlib.nullcontext),
+        ("15 us of computing after each tick", lambda: _idleCall(loop, _busy())),
+        ("512 KB written after each tick", lambda: _idleCall(loop, _memory())),
+        ("the recorder of the 5 plots", lambda: _recording(loop, series)),
+        ("a dashboard, 5 plots read by a client", lambda: _served(loop, series)),
+        ("the recorder, its rows served by a thread", lambda: _ringServed(loop, series, "thread")),
+        ("the same, served by a process", lambda: _ringServed(loop, series, "process")),
+    ]
+    ticks: dict[str, list[np.ndarray]] = {name: [] for name, _ in kinds}
+    for r in range(rounds):
+        for name, make in kinds if r % 2 == 0 else kinds[::-1]:
+            with make():
+                loop.start()  # a first second unmeasured: every part settled
+                time.sleep(min(1.0, seconds))
+                loop.stop()
+                ticks[name].append(_phase(loop, seconds))
+        print(f"round {r + 1}/{rounds} done", flush=True)
+    print(machine_line(f"numpy {np.__version__}"))
+    print(f"Talos reach loop at 1 kHz, {rounds} x {seconds:g} s per part")
+    print(f"{'':44s} {'median':>8s} {'ratio':>6s} {'(quartiles)':>14s}")
+    alone = ticks[kinds[0][0]]
+    for name, _ in kinds:
+        r = [np.median(a) / np.median(b) for a, b in zip(ticks[name], alone, strict=True)]
+        q1, q2, q3 = np.percentile(r, [25, 50, 75])
+        med = np.median(np.concatenate(ticks[name])) * 1e6
+        print(f"{name:44s} {med:6.1f}us {q2:6.3f}  ({q1:.3f}-{q3:.3f})")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each phase, s")
@@ -197,6 +443,11 @@ def main() -> int:
         "--never-idle",
         action="store_true",
         help="the loop spins through the whole period (spin = dt): its CPU never idles",
+    )
+    ap.add_argument(
+        "--parts",
+        action="store_true",
+        help="measure each part of the cost on its own instead (short phases, many rounds)",
     )
     args = ap.parse_args()
     if args.quick:
@@ -224,6 +475,9 @@ def main() -> int:
     if args.never_idle:
         placement += "; the loop never idles (spin = dt)"
     loop.step(200)  # warm: plans compiled, caches filled
+    if args.parts:
+        parts(loop, p, args.rounds, args.seconds)
+        return 0
     without, with_, frames, elsewhere, client, rates = [], [], [], [], [], []
 
     def page() -> None:
