@@ -500,7 +500,7 @@ let drawPending = false;
 function drawSoon() {
   if (drawPending) return;
   drawPending = true;
-  requestAnimationFrame(() => { drawPending = false; S.draws++; if (!S.paused) redraw(); });
+  requestAnimationFrame(() => { drawPending = false; if (!S.paused) { S.draws++; redraw(); } });
 }
 
 function redraw() {
