@@ -45,7 +45,7 @@ Usage::
 
     python benchmarks/bench_dashboard.py                # 3 rounds of 8 s each
     python benchmarks/bench_dashboard.py --quick        # 1 round of 2 s, a smoke check
-    python benchmarks/bench_dashboard.py --parts --rounds 12 --seconds 1.5
+    python benchmarks/bench_dashboard.py --parts --rounds 14 --seconds 1.5
 """
 
 from __future__ import annotations
@@ -159,24 +159,31 @@ def _reader(url: str, port: int, series: list) -> Iterator[None]:
         proc.wait()
 
 
-def _client(loop, seconds: float, p: str) -> tuple[np.ndarray, float]:
-    """The loop with the dashboard, its 5 plots read by a client in another process."""
+@contextlib.contextmanager
+def _served(loop, series: list) -> Iterator[Any]:
+    """A dashboard on the loop (yielded), ``series`` plotted by a client in another
+    process that reads its frames."""
     from sotpy.dashboard import Dashboard
 
     ui = Dashboard(loop, seconds=5.0)
-    series = [(sig.format(p=p), comps) for sig, comps in PLOTS]
     try:
         loop.start()
         with _reader(ui.url(), ui.port, series):
             loop.stop()
-            f0 = sum(f for f, _ in ui.frameCounts())
-            t0 = time.monotonic()
-            ticks = _phase(loop, seconds)
-            rate = (sum(f for f, _ in ui.frameCounts()) - f0) / (time.monotonic() - t0)
-            return ticks, rate
+            yield ui
     finally:
         loop.stop()
         ui.close()
+
+
+def _client(loop, seconds: float, p: str) -> tuple[np.ndarray, float]:
+    """The loop with the dashboard, its 5 plots read by a client in another process."""
+    with _served(loop, [(sig.format(p=p), comps) for sig, comps in PLOTS]) as ui:
+        f0 = sum(f for f, _ in ui.frameCounts())
+        t0 = time.monotonic()
+        ticks = _phase(loop, seconds)
+        rate = (sum(f for f, _ in ui.frameCounts()) - f0) / (time.monotonic() - t0)
+        return ticks, rate
 
 
 def _elsewhere(loop, seconds: float) -> np.ndarray:
@@ -256,22 +263,6 @@ def _recording(loop, series: list) -> Iterator[Any]:
             yield rec
     finally:
         rec.detach()
-
-
-@contextlib.contextmanager
-def _served(loop, series: list) -> Iterator[None]:
-    """A dashboard on the loop, ``series`` plotted by a client in another process."""
-    from sotpy.dashboard import Dashboard
-
-    ui = Dashboard(loop, seconds=5.0)
-    try:
-        loop.start()
-        with _reader(ui.url(), ui.port, series):
-            loop.stop()
-            yield
-    finally:
-        loop.stop()
-        ui.close()
 
 
 # The same serving code in a thread of the loop's process or in a process of its own:

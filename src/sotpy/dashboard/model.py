@@ -586,10 +586,8 @@ class Recorder:
             return
         i, t, part, plan, columns = self._open
         self._open = None
-        state = getattr(self.device, "state", None)
-        now = getattr(state, "time", t + 1 if part == "shared" else t)
-        ok = now == (t + 1 if part == "shared" else t)
-        if ok:
+        held = t + 1 if part == "shared" else t  # the state's time while T's values hold
+        if getattr(getattr(self.device, "state", None), "time", held) == held:
             self._store(plan, columns, i, t)
         else:
             for c in columns:
