@@ -28,6 +28,7 @@ from .se3 import (
     Multiply_of_matrixHomo,
     PoseUThetaToMatrixHomo,
 )
+from .selector import Selector
 from .signal_tools import (
     Delay_of_double,
     Delay_of_matrix,
@@ -91,6 +92,7 @@ __all__ = [
     "OpPointModifier",
     "PoseUThetaToMatrixHomo",
     "Selec_of_vector",
+    "Selector",
     "Seqplay",
     "Stack_of_vector",
     "Substract_of_double",
