@@ -63,8 +63,6 @@ NOT_SERVED: dict[str, str] = {
     "dynamic_graph.sot.core.feature_vector3": "FeaturePose with selec '000111'",
     "dynamic_graph.sot.core.robot_utils": "load_robot and the robot descriptions",
     "dynamic_graph.sot.torque_control": "sotpy's torque-level controller (docs/torque-control.md)",
-    "dynamic_graph.sot.pattern_generator": "CubicInterpolationSE3 / Seqplay "
-    "trajectories (docs/operators.md)",
     "dynamic_graph.sot.application.acceleration": "sotpy's torque-level controller "
     "(docs/torque-control.md)",
 }

@@ -983,7 +983,7 @@ def load_robot(name: str | Path, prefix: str | None = None) -> Robot:
             if pool.hasEntity(n):
                 pool.remove(n)
         raise
-    return Robot(
+    robot = Robot(
         name=d["name"],
         model=loaded.model,
         visual_model=loaded.visual_model,
@@ -996,3 +996,22 @@ def load_robot(name: str | Path, prefix: str | None = None) -> Robot:
         couplings=p.couplings,
         description=d,
     )
+    _LOADED[dynamic.name] = robot
+    return robot
+
+
+#: The robots of :func:`load_robot` (by their Dynamic's name); :func:`loadedRobots`
+#: forgets those whose Dynamic left the pool.
+_LOADED: dict[str, Robot] = {}
+
+
+def loadedRobots() -> list[Robot]:
+    """The robots :func:`load_robot` made in this process that are still in use (their
+    ``Dynamic`` still in the pool): what a command that needs "the robot" looks in (the
+    pattern generator's ``buildModel()`` without an argument)."""
+    from ..graph import pool
+
+    for name, r in list(_LOADED.items()):
+        if not (pool.hasEntity(name) and pool.getEntity(name) is r.dynamic):
+            del _LOADED[name]
+    return list(_LOADED.values())

@@ -1,0 +1,35 @@
+# A SoT user's walking script, its generator part as sot-pattern-generator's walking.py
+# writes it (initPg), on Talos; the robot-loading lines are sotpy's Talos (HRP-2 is not in
+# example-robot-data). Prints the Selector's CoM and the generator's summary.
+from dynamic_graph import plug
+from dynamic_graph.sot.pattern_generator import PatternGenerator, Selector
+from dynamic_graph.sot.talos.talos import Talos
+robot = Talos("robot")
+pg = PatternGenerator("pg")
+pg.buildModel()
+pg.parseCmd(":samplingperiod 0.005")
+pg.parseCmd(":previewcontroltime 1.6")
+pg.parseCmd(":walkmode 0")
+pg.parseCmd(":omega 0.0")
+pg.parseCmd(":stepheight 0.05")
+pg.parseCmd(":singlesupporttime 0.78")
+pg.parseCmd(":doublesupporttime 0.02")
+pg.parseCmd(":armparameters 0.5")
+pg.parseCmd(":LimitsFeasibility 0.0")
+pg.parseCmd(":ZMPShiftParameters 0.015 0.015 0.015 0.015")
+pg.parseCmd(":TimeDistributeParameters 2.0 3.5 1.0 3.0")
+pg.parseCmd(":UpperBodyMotionParameters -0.1 -1.0 0.0")
+pg.parseCmd(":comheight 0.876681")
+pg.parseCmd(":SetAlgoForZmpTrajectory Morisawa")
+plug(robot.dynamic.position, pg.position)
+plug(robot.dynamic.com, pg.com)
+plug(robot.dynamic.signal("left-ankle"), pg.leftfootcurrentpos)
+plug(robot.dynamic.signal("right-ankle"), pg.rightfootcurrentpos)
+pg.motorcontrol.value = robot.dynamic.velocity.value.size * (0,)
+pg.zmppreviouscontroller.value = (0, 0, 0)
+pg.initState()
+comSelector = Selector("comSelector", ["vector", "ref", robot.dynamic.com, pg.comref])
+plug(pg.inprocess, comSelector.selec)
+pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0 0.2 0.17 0.0 0.0 0.0 -0.17 0.0 0.0")
+print("comref", comSelector.ref.value)
+print(pg.debug())
