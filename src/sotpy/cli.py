@@ -35,6 +35,7 @@ from typing import Any
 
 from .demos import (
     REACH_ROBOTS,
+    WALK_ROBOTS,
     collision_options,
     collision_run,
     finite_float,
@@ -51,6 +52,8 @@ from .demos import (
     torque_talos_options,
     torque_talos_run,
     ui_options,
+    walk_options,
+    walk_run,
 )
 
 __all__ = ["DEMOS", "SUBCOMMANDS", "build_parser", "main"]
@@ -143,6 +146,14 @@ DEMOS["torque-callbacks"] = (
     torque_callbacks_options,
     torque_callbacks_run,
 )
+for _robot in WALK_ROBOTS:
+    DEMOS[f"{_robot}-walk"] = (
+        f"the SoT's kinematic walk on {_robot.capitalize()}: PatternGenerator (preview "
+        "control), feet, CoM, waist and posture over the SOT; the motion's multibody ZMP "
+        "checked; --plot, --save, --viewer",
+        functools.partial(walk_options, robot=_robot),
+        walk_run,
+    )
 for _robot in REACH_ROBOTS:
     DEMOS[_robot] = (
         f"the SoT slides' reaching demo on {_robot.capitalize()}: feet fixed, CoM over the "

@@ -45,6 +45,7 @@ __all__ = [
     "plot_robot_tour",
     "plot_talos_torque",
     "plot_tracer",
+    "plot_walk",
     "recording",
 ]
 
@@ -452,5 +453,50 @@ def plot_talos_torque(out: Mapping[str, Any], path: str | Path | None = None) ->
     over = f" over the {side} foot" if side else ""
     where = {"floor": " on a floor", "welded": ", feet welded"}.get(out.get("contacts", ""), "")
     fig.suptitle(f"Talos{where}, torque control: CoM{over}, right hand reach, CoM back")
+    _save(fig, path)
+    return fig
+
+
+def plot_walk(
+    result: Mapping[str, Any], plan: Any, path: str | Path | None = None, title: str = "walk"
+) -> Any:
+    """A walk's run (the result of ``sotpy.demos.walk.run_walk`` and the generator's
+    :class:`~sotpy.walking.plan.StepPlan`), saved as PNG at ``path`` if given; returns
+    the ``matplotlib.figure.Figure``.
+
+    Top: the top view (m): the planned footprints (soles outlined, left blue, right
+    red), the ZMP reference, the multibody ZMP computed from the motion, the CoM.
+    Bottom: the multibody ZMP's margin to the support polygon of the feet on the ground
+    (mm, positive inside) and its distance to the cart-table ZMP (mm), against time.
+    """
+    fig, axes = _figure(13.0, 8.0, 2, 1, height_ratios=(1.2, 1.0))
+    top, low = axes[0][0], axes[1][0]
+    t = np.asarray(result["t"])
+    m = result["motion"]
+    rows = [plan.initial["left"], plan.initial["right"], *plan.steps]
+    corners = plan.sole.corners()
+    for f in rows:
+        poly = _closed(f.point(corners))
+        top.plot(poly[:, 0], poly[:, 1], color="C0" if f.side == "left" else "C3", lw=0.8)
+    zref = plan.zmpReference(t)
+    top.plot(zref[:, 0], zref[:, 1], color="0.4", lw=0.8, label="ZMP reference")
+    top.plot(m["zmp"][:, 0], m["zmp"][:, 1], color="C2", lw=0.6, label="multibody ZMP")
+    top.plot(m["com"][:, 0], m["com"][:, 1], color="k", lw=1.2, label="CoM")
+    top.set_aspect("equal")
+    top.set_xlabel("x [m]")
+    top.set_ylabel("y [m]")
+    top.set_title(f"{title}: top view (soles as planned; left blue, right red)")
+    top.legend(loc="upper left", fontsize=8)
+    low.plot(t, result["margin_series"] * 1e3, color="C2", lw=0.8, label="ZMP margin")
+    dz = np.linalg.norm(m["zmp"] - result["cart_zmp"], axis=1) * 1e3
+    low.plot(t, dz, color="C1", lw=0.6, label="|multibody - cart-table ZMP|")
+    low.axhline(10.0, color="C2", ls="--", lw=0.9, label="margin target 10 mm")
+    low.axhline(0.0, color="k", lw=0.6)
+    low.set_xlabel("t [s]")
+    low.set_ylabel("[mm]")
+    low.set_title(
+        "the multibody ZMP (from the motion) in the support polygon of the feet on the ground"
+    )
+    low.legend(loc="upper right", fontsize=8)
     _save(fig, path)
     return fig

@@ -45,6 +45,7 @@ __all__ = [
     "ROBOT_DEMO_DEFAULTS",
     "TORQUE_STRATEGIES",
     "VIEWER_FRAME",
+    "WALK_ROBOTS",
     "collision_options",
     "collision_run",
     "finite_float",
@@ -64,6 +65,8 @@ __all__ = [
     "torque_talos_run",
     "ui_options",
     "viewer_options",
+    "walk_options",
+    "walk_run",
 ]
 
 
@@ -707,4 +710,86 @@ def collision_run(args: argparse.Namespace) -> int:
         f"talos-collision {verdict}{': ' + ', '.join(failed) if failed else ''} "
         f"({result['ticks']} ticks in {result['wall_time']:.2f} s)"
     )
+    return 0 if result["ok"] else 1
+
+
+#: The robots of ``sotpy demo <robot>-walk``.
+WALK_ROBOTS = ("talos", "nao")
+
+
+def walk_options(parser: argparse.ArgumentParser, robot: str) -> None:
+    """Options of ``sotpy demo <robot>-walk``: ``--steps N``, ``--step-length M``,
+    ``--single-support S``, ``--double-support S``, ``--dt S``, ``--plot PATH``,
+    ``--save FILE.npz``, ``--viewer``, ``--hold S``."""
+    from .walk import GAITS
+
+    gait = GAITS[robot]
+    parser.add_argument("--steps", type=int, default=gait.steps, help=f"swings ({gait.steps})")
+    parser.add_argument(
+        "--step-length",
+        type=positive_float,
+        default=gait.length,
+        metavar="M",
+        help=f"each foot lands this far ahead of the other, m ({gait.length})",
+    )
+    parser.add_argument(
+        "--single-support",
+        type=positive_float,
+        default=gait.ss,
+        metavar="S",
+        help=f"single support, s ({gait.ss})",
+    )
+    parser.add_argument(
+        "--double-support",
+        type=positive_float,
+        default=gait.ds,
+        metavar="S",
+        help=f"double support, s ({gait.ds})",
+    )
+    parser.add_argument(
+        "--dt", type=positive_float, default=1e-3, metavar="S", help="control period, s (1e-3)"
+    )
+    parser.add_argument(
+        "--plot", metavar="PATH", help="save the top view and the ZMP's margin (PNG)"
+    )
+    parser.add_argument(
+        "--save", metavar="FILE.npz", help="save t, q, v, the contact phase, the footprints"
+    )
+    viewer_options(parser)
+    parser.set_defaults(walk_robot=robot)
+
+
+def walk_run(args: argparse.Namespace) -> int:
+    """Run ``sotpy demo <robot>-walk``: 0 when every check of the motion holds, 1
+    otherwise or on an error, 130 on Ctrl-C."""
+    from dataclasses import replace
+
+    from ..errors import SotpyError
+    from .walk import GAITS, run_walk
+
+    name = f"{args.walk_robot}-walk"
+    gait = replace(
+        GAITS[args.walk_robot],
+        steps=args.steps,
+        length=args.step_length,
+        ss=args.single_support,
+        ds=args.double_support,
+    )
+    try:
+        result = run_walk(
+            args.walk_robot,
+            gait=gait,
+            dt=args.dt,
+            plot=args.plot,
+            save=args.save,
+            viewer=args.viewer,
+        )
+    except (SotpyError, ValueError) as exc:
+        print(f"sotpy demo {name}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"sotpy demo {name}: interrupted", file=sys.stderr)
+        return 130
+    failed = [k for k, v in result["checks"].items() if not v]
+    print(f"{name} {'OK' if result['ok'] else 'FAILED: ' + ', '.join(failed)}")
     return 0 if result["ok"] else 1

@@ -1,0 +1,118 @@
+"""The kinematic walk's costs: the preview-control tick, an online step added, and the
+whole walking tick on Talos (generator, stack, device) against the same graph standing
+(the generator not triggered), measured in the same run.
+
+* **preview tick**: :meth:`sotpy.walking.preview.PreviewController.step` (both axes,
+  N = 320 samples of 5 ms ahead), the work of one generator sample;
+* **generator read**: ``PatternGenerator.onestepofcontrol`` and its outputs at one tick
+  (the plan's feet, the cubic CoM, the ZMP reference; a preview step every 5th tick);
+* **walking tick**: ``device.increment(1 ms)`` of the walking graph (docs/walking.md):
+  the generator, the four-level SOT and the device, over the 15-step walk;
+* **standing tick**: the same graph with the generator not triggered (the reference:
+  what the walk adds is the generator and the moving references).
+
+Reported: median, p99 and worst (us), and the ratio of the walking tick's median to the
+standing tick's. Usage::
+
+    python benchmarks/bench_walk.py           # the whole walk
+    python benchmarks/bench_walk.py --quick   # 3 s of it, a smoke check
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("SOTPY_JIT", "wait")
+
+import argparse
+import time
+import warnings
+
+import numpy as np
+
+from sotpy._bench import machine_line
+from sotpy.demos.walk import GAITS, build_walk
+from sotpy.dynamics import load_robot
+from sotpy.graph import pool
+from sotpy.walking.preview import PreviewController, previewGains
+
+
+def _stats(samples: list[float]) -> tuple[float, float, float]:
+    a = np.asarray(samples) * 1e6
+    return float(np.median(a)), float(np.percentile(a, 99)), float(a.max())
+
+
+def preview_tick(n: int = 20000) -> tuple[float, float, float]:
+    g = previewGains(0.005, 0.876681)
+    ctrl = PreviewController(g, np.zeros((3, 2)))
+    ref = np.zeros((n + g.F.size + 1, 2))
+    ref[:, 0] = np.floor(np.arange(len(ref)) * 0.005 / 0.8) * 0.2
+    out = []
+    for k in range(n):
+        t0 = time.perf_counter()
+        ctrl.step(ref[k : k + g.F.size + 1])
+        out.append(time.perf_counter() - t0)
+    return _stats(out)
+
+
+def walking_ticks(seconds: float | None) -> dict[str, tuple[float, float, float]]:
+    pool.clear()
+    robot = load_robot("talos", prefix="bw")
+    graph = build_walk(robot, GAITS["talos"], 1e-3, "bw")
+    pg = graph["pg"]
+    pg.trigger.value = True
+    robot.device.increment(1e-3)
+    ticks = round((seconds or pg.plan.duration) / 1e-3)
+    walk, gen = [], []
+    for _ in range(ticks):
+        t0 = time.perf_counter()
+        robot.device.increment(1e-3)
+        walk.append(time.perf_counter() - t0)
+    # the generator alone, on a fresh one stepped by hand at the same ticks
+    pool.clear()
+    robot = load_robot("talos", prefix="bg")
+    graph = build_walk(robot, GAITS["talos"], 1e-3, "bg")
+    pg = graph["pg"]
+    pg.trigger.value = True
+    signals = [pg.comref, pg.dcomref, pg.leftfootref, pg.rightfootref, pg.leftfootvelocity]
+    signals += [pg.rightfootvelocity, pg.waistattitudematrixabsolute]
+    for _ in range(ticks):
+        pool.time += 1
+        t0 = time.perf_counter()
+        for s in signals:
+            s(pool.time)
+        gen.append(time.perf_counter() - t0)
+    return {"walking tick": _stats(walk), "generator read": _stats(gen)}
+
+
+def standing_tick(ticks: int) -> tuple[float, float, float]:
+    pool.clear()
+    robot = load_robot("talos", prefix="bs")
+    build_walk(robot, GAITS["talos"], 1e-3, "bs")  # trigger left false: the robot stands
+    out = []
+    for _ in range(ticks):
+        t0 = time.perf_counter()
+        robot.device.increment(1e-3)
+        out.append(time.perf_counter() - t0)
+    return _stats(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--quick", action="store_true", help="3 s of the walk")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    print(machine_line())
+    rows = {"preview tick (N = 320, 2 axes)": preview_tick(2000 if args.quick else 20000)}
+    rows.update(walking_ticks(3.0 if args.quick else None))
+    n = 3000 if args.quick else 14000
+    rows["standing tick (reference)"] = standing_tick(n)
+    print(f"{'':34} {'median':>8} {'p99':>8} {'worst':>8}  (us)")
+    for name, (med, p99, worst) in rows.items():
+        print(f"{name:34} {med:8.1f} {p99:8.1f} {worst:8.1f}")
+    ratio = rows["walking tick"][0] / rows["standing tick (reference)"][0]
+    print(f"walking tick / standing tick (median): {ratio:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,195 @@
+"""The PatternGenerator entity: its commands, parseCmd, bad input, and a walk judged by
+the physics of the motion (the multibody ZMP from Pinocchio, the soles' own motion)."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from sotpy.demos.walk import GAITS, Gait, run_walk, stepSequence, zmpMargin
+from sotpy.dynamics import load_robot
+from sotpy.errors import CommandError, SotpyWarning
+from sotpy.graph import plug
+from sotpy.walking import PatternGenerator
+
+
+@pytest.fixture
+def talos_pg():
+    robot = load_robot("talos", prefix="pgt")
+    pg = PatternGenerator("pgt_pg")
+    pg.buildModel(robot)
+    plug(robot.dynamic.position, pg.position)
+    plug(robot.dynamic.com, pg.com)
+    plug(robot.dynamic.signal("left-ankle"), pg.leftfootcurrentpos)
+    plug(robot.dynamic.signal("right-ankle"), pg.rightfootcurrentpos)
+    pg.initState()
+    return robot, pg
+
+
+def test_outputs_hold_the_initial_state_before_the_trigger(talos_pg):
+    robot, pg = talos_pg
+    np.testing.assert_allclose(pg.comref.value, robot.dynamic.com.value, atol=1e-12)
+    assert pg.leftfootref.value.isApprox(robot.dynamic.signal("left-ankle").value, 1e-12)
+    assert pg.rightfootref.value.isApprox(robot.dynamic.signal("right-ankle").value, 1e-12)
+    np.testing.assert_array_equal(pg.dcomref.value, np.zeros(3))
+    assert pg.inprocess.value is False
+    assert pg.contactphase.value == 0
+    # the waist's reference is the base's orientation (Pinocchio's free flyer)
+    R = pg.waistattitudematrixabsolute.value.rotation
+    np.testing.assert_allclose(R, robot.dynamic.signal("waist").value.rotation, atol=1e-9)
+
+
+def test_parse_cmd_sets_parameters_and_refuses_bad_lines(talos_pg):
+    _, pg = talos_pg
+    pg.parseCmd(":comheight 0.876681")
+    pg.parseCmd(":singlesupporttime 0.7")
+    pg.parseCmd(":doublesupporttime 0.1")
+    assert pg.comHeight == pytest.approx(0.876681)
+    assert "single support 0.7 s, double support 0.1 s" in pg.debug()
+    pg.parseCmd(":ZMPShiftParameters 0.015 0.015 0.015 0.015")
+    assert "ZMPShiftParameters 0.015" in pg.debug() and "no effect" in pg.debug()
+    with pytest.raises(CommandError, match=r"parseCmd\(:comheight\).*1 number"):
+        pg.parseCmd(":comheight 0.8 0.9")
+    with pytest.raises(CommandError, match="expected numbers"):
+        pg.parseCmd(":singlesupporttime fast")
+    with pytest.raises(CommandError, match="legs' reach"):
+        pg.parseCmd(":comheight 1.2")
+    with pytest.raises(CommandError, match="sampling period"):
+        pg.parseCmd(":doublesupporttime 0.001")
+    assert pg.comHeight == pytest.approx(0.876681)  # unchanged by the refusals
+    with pytest.raises(CommandError, match="not in sotpy's generator yet"):
+        pg.parseCmd(":useDynamicFilter true")
+    pg.parseCmd(":useDynamicFilter false")
+
+
+def test_unknown_command_warns_with_the_nearest_name(talos_pg):
+    _, pg = talos_pg
+    with pytest.warns(SotpyWarning, match="did you mean :TimeDistributionParameters"):
+        pg.parseCmd(":TimeDistributeParameters 2.0 3.5 1.0 3.0")
+
+
+def test_stepseq_reads_four_numbers_a_step_and_explains_the_legacy_form(talos_pg):
+    _, pg = talos_pg
+    # walking.py's 6 triplets: 18 numbers, not a multiple of 4
+    legacy = "0.0 0.085 0.0 0.2 -0.17 0.0 0.2 0.17 0.0 0.2 -0.17 0.0 0.2 0.17 0.0 0.0 -0.17 0.0"
+    with pytest.raises(CommandError, match="legacy 3-number form"):
+        pg.parseCmd(":stepseq " + legacy)
+    with pytest.raises(CommandError, match="flat ground"):
+        pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 0.17 0.0 0.1")
+    with pytest.raises(CommandError, match="longer than the leg"):
+        pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.9 0.17 0.0 0.0")
+    with pytest.raises(CommandError, match="crosses or overlaps"):
+        pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 -0.05 0.0 0.0")
+    with pytest.raises(CommandError, match="where the support foot is"):
+        pg.parseCmd(":stepseq 0.1 -0.085 0.0 0.0  0.2 0.17 0.0 0.0")
+    assert "steps pending 0" in pg.debug()  # nothing was kept from the refusals
+    pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 0.17 0.0 0.0  0.0 -0.17 0.0 0.0")
+    assert "steps pending 3" in pg.debug()
+
+
+def test_model_files_are_refused_with_the_way_to_do_it(talos_pg):
+    _, pg = talos_pg
+    for cmd in ("setURDFpath", "setVrmlDir", "setXmlSpec"):
+        with pytest.raises(CommandError, match=r"buildModel\(robot\)"):
+            getattr(pg, cmd)("/opt/openrobots/share/hrp2_14_description/urdf/hrp2_14.urdf")
+    with pytest.raises(CommandError, match="world frame only"):
+        pg.frameReference("Egocentered")
+    pg.frameReference("World")
+
+
+def test_build_model_without_a_robot_finds_the_only_one():
+    load_robot("nao", prefix="pgn")
+    pg = PatternGenerator("pgn_pg")
+    pg.buildModel()
+    assert pg.geometry.name == "nao"
+    load_robot("nao", prefix="pgn2")
+    with pytest.raises(CommandError, match="found 2"):
+        PatternGenerator("pgn_pg2").buildModel()
+
+
+def test_step_sequence_numbers():
+    seq = stepSequence(Gait(steps=3, length=0.2), 0.17)
+    assert seq == [
+        0.0,
+        -0.085,
+        0.0,
+        0.0,
+        0.2,
+        0.17,
+        0.0,
+        0.0,
+        0.2,
+        -0.17,
+        0.0,
+        0.0,
+        0.0,
+        0.17,
+        0.0,
+        0.0,
+    ]
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    assert zmpMargin(np.array([0.5, 0.25]), square) == pytest.approx(0.25)
+    assert zmpMargin(np.array([1.5, 0.5]), square) == pytest.approx(-0.5)
+
+
+def _walk(robot: str, gait: Gait) -> dict:
+    with warnings.catch_warnings():
+        warnings.simplefilter(
+            "ignore"
+        )  # a budget stop on a loaded machine is counted, not an error
+        return run_walk(robot, gait=gait, out=lambda *_: None)
+
+
+def test_talos_walks_fifteen_steps_as_the_sot_does():
+    """The SoT's Talos walk (15 steps of 0.2 m, 0.78 / 0.02 s): 2.80 m, judged by the
+    motion: the multibody ZMP inside the soles on the ground, feet that do not slide."""
+    r = _walk("talos", GAITS["talos"])
+    assert r["distance"] == pytest.approx(2.80, abs=0.02)
+    assert r["footprint_error"] <= 5e-3
+    assert r["slip"] <= 1e-4
+    assert r["com_error"] <= 2e-3
+    assert r["feet_error"] <= 1e-3
+    assert r["margin"] >= 0.01
+    assert r["ticks_outside"] == 0
+    # how far the whole body is from the cart-table model (the issue's 40 mm needs
+    # Kajita's second stage; measured 47-55 mm without it)
+    assert r["zmp_vs_cart_p99"] <= 0.06
+    # the stance feet are really on the ground (not a view of the plan): at every tick
+    # at least one sole is down, and both are during the double supports
+    down = r["onGround"]["left"] | r["onGround"]["right"]
+    assert down[1:].all()
+
+
+def test_nao_walks_at_its_scale():
+    r = _walk("nao", Gait(steps=6, length=0.05, ss=0.45, ds=0.02, height=0.02))
+    assert r["ok"], r["checks"]
+    assert r["distance"] == pytest.approx(0.25, abs=0.02)
+    assert r["zmp_vs_cart_p99"] <= 0.04
+
+
+def test_a_sot_walking_script_sets_up_its_generator_under_sotpy_run():
+    """sot-pattern-generator's initPg as scripts send it (jrl-walkgen's commands, the
+    misspelt one included), the Selector's meta constructor, :stepseq."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent / "sot_scripts" / "talos_pg_setup.py"
+    env = {**os.environ, "SOTPY_JIT": "0", "PYTHONPATH": str(script.parents[2] / "src")}
+    r = subprocess.run(
+        [sys.executable, "-m", "sotpy", "run", str(script)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert r.returncode == 0, r.stderr
+    com = load_robot("talos", prefix="ref").dynamic.com.value
+    line = next(x for x in r.stdout.splitlines() if x.startswith("comref"))
+    got = np.array([float(v) for v in line.split("[", 1)[1].rstrip("]").split()])
+    np.testing.assert_allclose(got, com, atol=1e-6)  # the Selector chose the robot's CoM
+    assert "CoM height 0.876681 m" in r.stdout
+    assert "steps pending 3" in r.stdout
+    assert "ZMPShiftParameters 0.015 0.015 0.015 0.015: recorded, no effect" in r.stdout
+    assert "did you mean :TimeDistributionParameters" in r.stderr
