@@ -26,7 +26,8 @@ a one-tick spike of the multibody ZMP, 10 cm on Talos with a ``sin^2`` height pr
 The ZMP reference ``p_ref(t)`` (m, world xy) is the centre of the supporting sole in
 single support, and moves from the previous support's centre to the next one during
 each double support along the same quintic ``m``: from the mid-point of both soles to the
-first support during the start, and back to the mid-point during the end.
+first support during the start (from the CoM's projection, where the ZMP of a robot at
+rest is, when given), and back to the mid-point during the end.
 :meth:`StepPlan.zmpReference` samples it for the preview controller.
 
 The checks of :func:`checkStep` are the ones a robot cannot survive: a step longer than
@@ -198,7 +199,13 @@ class StepPlan:
     """A walk from the footprints ``initial`` (``{"left": ..., "right": ...}``) through
     ``steps`` (each the next footprint of the swinging foot, alternating sides), with
     single support ``ss``, double support ``ds``, start and end double supports
-    ``tStart`` and ``tEnd`` (s), step height ``stepHeight`` (m), on soles ``sole``.
+    ``tStart`` and ``tEnd`` (s), step height ``stepHeight`` (m), on soles ``sole``;
+    ``zmpStart`` (x, y; m) is where the ZMP is at the start (the CoM's projection of a
+    robot at rest; default the mid-point of the soles' centres): a reference that
+    started elsewhere would throw the CoM there in the first samples. The ZMP holds there
+    for the first ``tHold`` s of the start (a preview controller's window must begin
+    constant: a change already in it at the first sample is a change it "should" have
+    prepared for, and its first jerks catch up: 10 cm ZMP swings in 25 ms), then moves.
 
     The plan is a function of time ``t`` (s, from the start of the walk): :meth:`feet`,
     :meth:`zmpAt`, :meth:`contactPhase`, :meth:`supportPolygon`; steps can be appended
@@ -215,8 +222,12 @@ class StepPlan:
         tEnd: float,
         stepHeight: float,
         sole: Sole,
+        zmpStart: np.ndarray | None = None,
+        tHold: float = 0.0,
     ) -> None:
+        self.tHold = float(tHold)
         self.initial, self.steps, self.sole = initial, list(steps), sole
+        self.zmpStart = None if zmpStart is None else np.asarray(zmpStart, dtype=float)[:2]
         self.ss, self.ds, self.tStart, self.tEnd = ss, ds, tStart, tEnd
         self.stepHeight = stepHeight
         self._build()
@@ -230,6 +241,8 @@ class StepPlan:
         phases: list[Phase] = []
         t = 0.0
         mid = (self._centre(feet["left"]) + self._centre(feet["right"])) / 2
+        if self.zmpStart is not None:
+            mid = self.zmpStart
         if not self.steps:
             self.phases = [Phase(0.0, self.tStart, None, zmp=(mid, mid), feet=dict(feet))]
             self.final = feet
@@ -294,7 +307,8 @@ class StepPlan:
         if p.support is not None:
             return self._centre(p.feet[p.support])
         a, b = p.zmp
-        m = quintic((t - p.start) / (p.end - p.start))[0] if p.end > p.start else 1.0
+        start = p.start + (self.tHold if p is self.phases[0] else 0.0)
+        m = quintic((t - start) / (p.end - start))[0] if p.end > start else 1.0
         return a + (b - a) * m
 
     def _footprintsAt(self, t: float) -> dict[str, Footprint]:

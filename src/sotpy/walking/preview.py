@@ -154,17 +154,28 @@ class PreviewController:
     """Kajita's preview controller on both horizontal axes at once.
 
     ``PreviewController(gains, state)`` starts from ``state`` (3 x 2: rows ``c, dc, ddc``,
-    columns x, y; m, m/s, m/s^2) with a zero integrated error. Each :meth:`step` takes
+    columns x, y; m, m/s, m/s^2) with a zero integrated error. The law of the module doc
+    is the sum of the design's increments from a robot at rest at the origin (all zero),
+    so it is applied to the deviations from the rest at ``origin`` (x, y; default the
+    start's position): ``X - (origin, 0, 0)`` and ``p_ref - origin``. (Applied to the
+    absolute values, a robot at rest 1 m from the world's origin would be thrown by a
+    jerk of ``(Kx_0 - sum F) * 1 m``: the two differ by 1 %.) The reference should start
+    at the origin: a robot at rest has its ZMP under its CoM. Each :meth:`step` takes
     the ZMP reference at the current sample and the ``N`` next ones, applies the law of
     the module doc for one period and returns the jerk it applied (size 2, m/s^3).
     ``state``, ``jerk`` (the last one) and ``zmp`` (the cart-table ZMP ``C X``, size 2)
     are attributes.
     """
 
-    def __init__(self, gains: PreviewGains, state: np.ndarray) -> None:
+    def __init__(
+        self, gains: PreviewGains, state: np.ndarray, origin: np.ndarray | None = None
+    ) -> None:
         self.gains = gains
         self.A, self.B, self.C = cartTable(gains.period, gains.comHeight, gains.gravity)
         self.state = np.array(state, dtype=float).reshape(3, 2)
+        self.origin = self.state[0].copy() if origin is None else np.asarray(origin, float)
+        self._X0 = np.zeros((3, 2))
+        self._X0[0] = self.origin
         self.errorSum = np.zeros(2)
         self.jerk = np.zeros(2)
 
@@ -183,7 +194,11 @@ class PreviewController:
         and the ``N`` next ones (m). Returns the jerk applied (size 2, m/s^3)."""
         g = self.gains
         self.errorSum += self.C @ self.state - zmpRef[0]
-        u = -g.Ks * self.errorSum - g.Kx @ self.state + g.F @ zmpRef[1:]
+        u = (
+            -g.Ks * self.errorSum
+            - g.Kx @ (self.state - self._X0)
+            + g.F @ (zmpRef[1:] - self.origin)
+        )
         self.state = self.A @ self.state + np.outer(self.B, u)
         self.jerk = u
         return u
