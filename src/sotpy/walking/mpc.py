@@ -337,6 +337,7 @@ class VelocityMPC:
         self._Quu = p.alpha * pr.Pvu.T @ pr.Pvu + p.beta * np.eye(N) + p.gamma * pr.Pzu.T @ pr.Pzu
         self._k = np.arange(1, N + 1)
         self._last: tuple | None = None  # (mode, support, side) of the last solve
+        self._next: tuple | None = None  # the fixed next footstep of the current solve
         w0 = math.sqrt(p.gravity / p.comHeight)
         self._Xs = pr.Pps[-1] + pr.Pvs[-1] / w0  # the DCM at the horizon's end: on X0
         self._Xu = pr.Ppu[-1] + pr.Pvu[-1] / w0  # and on the jerks
@@ -376,6 +377,7 @@ class VelocityMPC:
         timeInStep: float,
         velocity: np.ndarray,
         otherFoot: tuple[float, float, float] | None = None,
+        nextStep: tuple[float, float, float] | None = None,
     ) -> MPCResult:
         """Plan the next N jerks and footsteps (module doc).
 
@@ -388,6 +390,10 @@ class VelocityMPC:
             otherFoot: the other sole ``(x, y, yaw)`` when it is on the ground (during
                 the double support, or standing), else None (in the air): with it the
                 ZMP may use the convex hull of both soles, and a zero command stands.
+            nextStep: the next footstep ``(x, y, yaw)`` when it is no longer a choice
+                (the swing foot has landed early, or its target is frozen): it is then
+                fixed, and the walk's modes reduce to ``"walking"`` for this step (a zero
+                command stops at the step after).
 
         Raises:
             CommandError: an argument of the wrong size, non-finite, or out of range.
@@ -396,8 +402,15 @@ class VelocityMPC:
         X0, sup, tau, v, other = self._inputs(
             com, support, supportSide, timeInStep, velocity, otherFoot
         )
+        self._next = None
+        if nextStep is not None:
+            self._next = tuple(
+                _array("VelocityMPC.solve", "nextStep", nextStep, (3,), "(x, y, yaw) or None")
+            )
         together = other is not None and self._sideBySide(sup, supportSide, other)
-        if np.all(np.abs(v) < _ZERO_COMMAND):
+        if self._next is not None:
+            modes = ["walking"]
+        elif np.all(np.abs(v) < _ZERO_COMMAND):
             modes = ["standing", "stopping", "walking"] if together else ["stopping", "walking"]
         else:
             resting = self._last is None or self._last == ("standing", sup, supportSide)
@@ -447,12 +460,18 @@ class VelocityMPC:
             fixed[1] = other
         if mode == "stopping" and J >= 1:
             fixed[1] = _sideBySide(p, sup, side)
+        nxt = self._next if mode == "walking" and J >= 1 else None
+        if nxt is not None:
+            fixed[1] = nxt
         first = len(fixed) if mode in ("walking", "starting") else J + 1
         free = list(range(first, J + 1))
         m = len(free)
         yaws = [sup[2]] * (J + 1)
         if mode in ("walking", "starting"):
-            base, j0 = (sup[2], 0) if mode == "walking" else (other[2], 1)
+            if nxt is not None:
+                base, j0 = nxt[2], 1
+            else:
+                base, j0 = (sup[2], 0) if mode == "walking" else (other[2], 1)
             for j in range(j0, J + 1):
                 yaws[j] = base + omega * (j - j0) * Ts
         nv = 2 * N + 2 * m
