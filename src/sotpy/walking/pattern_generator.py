@@ -59,14 +59,27 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics.types import SE3
-from ..errors import CommandError, EntityError, SotpyWarning
+from ..errors import CommandError, EntityError, SignalTypeError, SotpyWarning
 from ..graph import BOOL, INT, MATRIX, VECTOR, Entity, Input, Output, command
+from .mpc import MPCParameters
 from .plan import Footprint, Sole, StepPlan, checkStep, quintic
-from .preview import GRAVITY, PreviewController, previewGains, stateAt
+from .preview import GRAVITY, previewGains
+from .walks import FootstepWalk, VelocityWalk
 
 __all__ = ["PatternGenerator", "RobotGeometry", "robotGeometry"]
 
 _SIDES = ("left", "right")
+_FOOTSTEP_ALGORITHMS = ("Kajita", "Morisawa", "PBW", "Dimitrov")
+_VELOCITY_ALGORITHMS = ("Herdt", "Naveau")
+#: How long the CoM takes to reach ``:comheight`` from its height at initState (s).
+HEIGHT_TIME = 1.0
+#: The velocity walk's MPC period (s), Herdt et al.'s.
+_MPC_PERIOD = 0.1
+
+
+def _rotz(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class RobotGeometry:
@@ -74,7 +87,9 @@ class RobotGeometry:
     :class:`~sotpy.walking.plan.Sole`, the sole frame's name and ``soleToAnkle`` (the
     ankle op point's placement in the sole frame, ``pinocchio.SE3``); ``legLength`` (m,
     hip to ankle with the knee straight) and ``maxComHeight`` (m, the CoM's height with
-    the legs straight, from the configuration it was measured at)."""
+    the legs straight, from the configuration it was measured at); for the dynamic
+    filter, the Pinocchio ``model``, the ankles' and the waist's frame ids
+    (``ankleFrames``, ``waistFrame``) and the half-sitting ``posture`` (q)."""
 
     def __init__(
         self,
@@ -84,7 +99,13 @@ class RobotGeometry:
         soleToAnkle: dict[str, pin.SE3],
         legLength: float,
         maxComHeight: float,
+        model: Any = None,
+        ankleFrames: dict[str, int] | None = None,
+        waistFrame: int | None = None,
+        posture: np.ndarray | None = None,
     ) -> None:
+        self.model, self.ankleFrames, self.waistFrame = model, ankleFrames, waistFrame
+        self.posture = posture
         self.name = name
         self.sole = sole
         self.soleFrames = soleFrames
@@ -146,6 +167,10 @@ def robotGeometry(robot: Any) -> RobotGeometry:
         toAnkle,
         min(legs),
         float(com[2]) + min(rise),
+        model,
+        {s: model.getFrameId(robot.opPoints[f"{s}-ankle"]) for s in _SIDES},
+        model.getFrameId(robot.opPoints["waist"]) if "waist" in robot.opPoints else None,
+        np.asarray(robot.halfSitting, dtype=float).copy(),
     )
 
 
@@ -163,7 +188,6 @@ INERT_COMMANDS: dict[str, str] = {
     ":SetAutoFirstStep": "jrl-walkgen's automatic first step (the plan starts as given)",
     ":setDSFeetDistance": "the online MPC's feet distance",
     ":numberstepsbeforestop": "the online MPC's steps before stopping",
-    ":setfeetconstraint": "the online MPC's ZMP box",
     ":deleteallobstacles": "Naveau's obstacles",
 }
 
@@ -214,9 +238,16 @@ class PatternGenerator(Entity):
         self._initByRealState = True
         self._pending: list[tuple[float, float, float]] = []
         self._initial: dict[str, Any] | None = None
-        self._plan: StepPlan | None = None
+        self._walk: FootstepWalk | VelocityWalk | None = None
+        self._online = False
+        self._zmpBox: tuple[float, float] | None = None
+        self._filter = False
+        #: what the dynamic filter predicted of its plan (None: not run), see
+        #: :func:`sotpy.walking.dynamic_filter.dynamicFilter`
+        self.filterStats: dict[str, float] | None = None
         self._t0: int | None = None
         self._out: dict[str, Any] = {}
+        self._restCache: dict[str, tuple[Any, Any]] = {}  # a foot at rest's outputs
         self._inert: dict[str, list[str]] = {}
 
     # -- model and state -----------------------------------------------------------
@@ -285,6 +316,7 @@ class PatternGenerator(Entity):
             flat = pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, f.yaw), np.array([f.x, f.y, 0.0]))
             offsets[side] = pin.log6((flat * geo.soleToAnkle[side]).actInv(oMa)).vector
         self._initial = {
+            "q": q.copy() if q.size == self._geometry.model.nq else self._geometry.posture.copy(),
             "com": com,
             "ankles": ankles,
             "footprints": footprints,
@@ -294,8 +326,10 @@ class PatternGenerator(Entity):
         if self._comHeight is None:
             self._comHeight = float(com[2])
         self._checkComHeight(self._comHeight, "initState")
-        self._plan = None
+        self._walk = None
         self._t0 = None
+        if self._pending:
+            self._walk = self._footstepWalk(self._footprints(self._pending, "initState"))
         self._holdInitial()
 
     def _checkComHeight(self, h: float, what: str) -> None:
@@ -315,9 +349,10 @@ class PatternGenerator(Entity):
         geo = self._requireModel(who)
         if self._initial is None:
             raise CommandError(f"PatternGenerator({self.name}).{who}: call initState() first")
-        feet = self._initial["footprints"] if self._plan is None else self._plan.final
-        if self._plan is not None and self._plan.steps:
-            support = self._plan.steps[-1]
+        feet = self._initial["footprints"]
+        started = isinstance(self._walk, FootstepWalk) and self._t0 is not None
+        if started and self._walk.plan.steps:
+            support = self._walk.plan.steps[-1]
             out: list[Footprint] = []
             rest = list(steps)
         else:
@@ -355,14 +390,19 @@ class PatternGenerator(Entity):
         return out
 
     def _addSteps(self, steps: list[tuple[float, float, float]], who: str) -> None:
-        if self._plan is None:
+        if isinstance(self._walk, VelocityWalk) or self._online:
+            raise CommandError(
+                f"PatternGenerator({self.name}).{who}: the walk is driven by velocitydes "
+                f"(:HerdtOnline); steps cannot be added to it"
+            )
+        if self._t0 is None:
             all_steps = self._pending + steps
-            self._footprints(all_steps, who)  # refuse now, before anything moves
+            footprints = self._footprints(all_steps, who)  # refused now, before anything moves
             self._pending = all_steps
+            self._walk = self._footstepWalk(footprints)
             return
         new = self._footprints(steps, who)
-        self._plan.extend(new, self._now())
-        self._zmpSamples()
+        self._walk.extend(new, self._now())
 
     @command
     def addStep(self, x: float, y: float, theta: float) -> None:
@@ -381,11 +421,13 @@ class PatternGenerator(Entity):
     def setSingleSupportTime(self, time: float) -> None:
         """The single support's duration (s), at least the sampling period."""
         self._ss = self._stepTime("setSingleSupportTime", time)
+        self._replan()
 
     @command
     def setDoubleSupportTime(self, time: float) -> None:
         """The double support's duration (s), at least the sampling period."""
         self._ds = self._stepTime("setDoubleSupportTime", time)
+        self._replan()
 
     def _stepTime(self, who: str, time: float) -> float:
         t = float(time)
@@ -398,10 +440,16 @@ class PatternGenerator(Entity):
         return t
 
     def _requireIdle(self, who: str) -> None:
-        if self._plan is not None and self._t0 is not None and self._now() < self._plan.duration:
+        if self._t0 is not None and self._walk is not None and not self._walk.finished(self._now()):
             raise CommandError(
-                f"PatternGenerator({self.name}).{who}: cannot change the timing during a walk"
+                f"PatternGenerator({self.name}).{who}: cannot change the walk's parameters "
+                f"during a walk"
             )
+
+    def _replan(self) -> None:
+        """A parameter changed before the trigger: the planned walk is made again."""
+        if self._t0 is None and isinstance(self._walk, FootstepWalk):
+            self._walk = self._footstepWalk(self._footprints(self._pending, "replan"))
 
     @command
     def frameReference(self, frame: str) -> None:
@@ -447,7 +495,8 @@ class PatternGenerator(Entity):
 
     @command
     def dynamicFilter(self, on: bool) -> None:
-        """Kajita's second stage: refused when true (not in sotpy yet)."""
+        """Kajita's second stage (:mod:`sotpy.walking.dynamic_filter`), as
+        ``:useDynamicFilter``."""
         self.parseCmd(f":useDynamicFilter {'true' if on else 'false'}")
 
     @command
@@ -460,16 +509,19 @@ class PatternGenerator(Entity):
             f"preview {self._previewTime} s",
             f"  CoM height {self._comHeight} m, step height {self._stepHeight} m",
             f"  single support {self._ss} s, double support {self._ds} s",
-            f"  steps pending {len(self._pending)}, plan: "
-            + (
-                "none"
-                if self._plan is None
-                else f"{len(self._plan.steps)} swings, {self._plan.duration:.3f} s"
-            ),
+            f"  steps pending {len(self._pending)}, walk: " + self._walkSummary(),
         ]
         for cmd, args in sorted(self._inert.items()):
             lines.append(f"  {cmd} {' '.join(args)}: recorded, no effect ({INERT_COMMANDS[cmd]})")
         return "\n".join(lines)
+
+    def _walkSummary(self) -> str:
+        w = self._walk
+        if isinstance(w, FootstepWalk):
+            return f"{len(w.plan.steps)} swings, {w.plan.duration:.3f} s"
+        if isinstance(w, VelocityWalk) or self._online:
+            return "driven by velocitydes (online)"
+        return "none"
 
     def _refusedFile(self, what: str) -> Callable[..., None]:
         def refuse(*_: Any) -> None:
@@ -578,29 +630,35 @@ class PatternGenerator(Entity):
             )
         self._requireIdle(who)
         self._T = v
+        self._replan()
 
     def _cmdPreview(self, who: str, args: list[str]) -> None:
         v = self._positive(who, args)
         self._requireIdle(who)
         self._previewTime = v
+        self._replan()
 
     def _cmdComHeight(self, who: str, args: list[str]) -> None:
         v = self._positive(who, args)
         self._checkComHeight(v, "parseCmd(:comheight)")
         self._requireIdle(who)
         self._comHeight = v
+        self._replan()
 
     def _cmdStepHeight(self, who: str, args: list[str]) -> None:
         (v,) = self._numbers(who, args, 1)
         if v < 0:
             raise CommandError(f"{who}: expected a step height >= 0 (m), got {v}")
         self._stepHeight = v
+        self._replan()
 
     def _cmdSS(self, who: str, args: list[str]) -> None:
         self._ss = self._stepTime(who, self._positive(who, args))
+        self._replan()
 
     def _cmdDS(self, who: str, args: list[str]) -> None:
         self._ds = self._stepTime(who, self._positive(who, args))
+        self._replan()
 
     def _cmdOmega(self, who: str, args: list[str]) -> None:
         (v,) = self._numbers(who, args, 1)
@@ -620,13 +678,74 @@ class PatternGenerator(Entity):
         if len(args) != 1:
             raise CommandError(f"{who}: expected one algorithm name, got {args}")
         name = args[0]
-        if name not in ("Kajita", "Morisawa", "PBW", "Dimitrov"):
+        if name not in (*_FOOTSTEP_ALGORITHMS, *_VELOCITY_ALGORITHMS):
             raise CommandError(
-                f"{who}: sotpy tracks footsteps with Kajita's preview control ('Kajita'; "
-                f"'Morisawa', 'PBW' and 'Dimitrov' map onto it); the velocity-driven walk "
-                f"(Herdt, Naveau) is not in sotpy yet; got {name!r}"
+                f"{who}: expected one of {', '.join(_FOOTSTEP_ALGORITHMS)} (footsteps: "
+                f"Kajita's preview control) or {', '.join(_VELOCITY_ALGORITHMS)} (velocitydes: "
+                f"the walking MPC), got {name!r}"
             )
+        self._requireIdle(who)
         self._algorithm = name
+
+    def _cmdOnline(self, who: str, args: list[str]) -> None:
+        """``:HerdtOnline`` / ``:NaveauOnline``: the walk at the trigger is driven by
+        ``velocitydes`` (its numbers, if any, are ignored as jrl-walkgen ignores them)."""
+        self._numbers(who, args)
+        self._requireModel(who)
+        if self._initial is None:
+            raise CommandError(f"{who}: call initState() first")
+        self._requireIdle(who)
+        step = self._ss + self._ds
+        if abs(step / _MPC_PERIOD - round(step / _MPC_PERIOD)) > 1e-9:
+            raise CommandError(
+                f"{who}: the velocity walk's step ({self._ss} + {self._ds} s) must be a "
+                f"multiple of its MPC period {_MPC_PERIOD} s"
+            )
+        if self._ds < _MPC_PERIOD - 1e-9:
+            raise CommandError(
+                f"{who}: the velocity walk's double support ({self._ds} s) must last at least "
+                f"its MPC period {_MPC_PERIOD} s: the MPC constrains the ZMP at its samples, "
+                f"and between two of them the ZMP moves from one sole to the other"
+            )
+        if self._ss < _MPC_PERIOD + 0.3 - 1e-9:
+            raise CommandError(
+                f"{who}: the velocity walk's single support ({self._ss} s) must last at least "
+                f"{_MPC_PERIOD + 0.3:g} s (its swing ends one MPC period early)"
+            )
+        if self._pending:
+            raise CommandError(
+                f"{who}: steps were given (:stepseq, addStep): one walk or the other"
+            )
+        from .mpc import VelocityMPC
+
+        VelocityMPC(self.mpcParameters())  # refuse now the parameters the MPC refuses
+        self._online = True
+        if self._algorithm in _FOOTSTEP_ALGORITHMS:
+            self._algorithm = "Herdt" if "Herdt" in who else "Naveau"
+
+    def _cmdDynamicFilter(self, who: str, args: list[str]) -> None:
+        if len(args) != 1 or args[0] not in ("true", "false"):
+            raise CommandError(f"{who}: expected 'true' or 'false', got {args}")
+        self._requireIdle(who)
+        self._filter = args[0] == "true"
+        self._replan()
+
+    def _cmdVelReference(self, who: str, args: list[str]) -> None:
+        v = self._numbers(who, args, 3)
+        self.velocitydes.value = np.array(v)
+
+    def _cmdFeetConstraint(self, who: str, args: list[str]) -> None:
+        if len(args) != 3 or args[0] != "XY":
+            raise CommandError(f"{who}: expected 'XY mx my' (m), got {args}")
+        mx, my = self._numbers(who, args[1:], 2)
+        geo = self._requireModel(who)
+        hl, hw = geo.sole.length / 2 - mx, geo.sole.width / 2 - my
+        if hl <= 0 or hw <= 0:
+            raise CommandError(
+                f"{who}: the ZMP box (the sole's half sizes {geo.sole.length / 2:.4f} x "
+                f"{geo.sole.width / 2:.4f} m minus ({mx}, {my})) would be empty"
+            )
+        self._zmpBox = (hl, hw)
 
     def _cmdStepSeq(self, who: str, args: list[str]) -> None:
         values = self._numbers(who, args)
@@ -656,59 +775,98 @@ class PatternGenerator(Entity):
     def _now(self) -> float:
         return 0.0 if self._t0 is None else (self._tick - self._t0) * self._dt
 
+    def _footstepWalk(self, footprints: list[Footprint]) -> FootstepWalk:
+        """The walk of these footprints from the state of initState (module doc)."""
+        plan = StepPlan(
+            dict(self._initial["footprints"]),
+            footprints,
+            self._ss,
+            self._ds,
+            self._previewTime + self._tStart,
+            self._tEnd,
+            self._stepHeight,
+            self._geometry.sole,
+            zmpStart=self._initial["com"][:2],
+            tHold=self._previewTime,
+        )
+        gains = previewGains(self._T, self._comHeight, self._previewTime)
+        walk = FootstepWalk(plan, gains, self._initial["com"])
+        self.filterStats = None
+        if self._filter and footprints:
+            from .dynamic_filter import dynamicFilter
+
+            self.filterStats = dynamicFilter(self, walk)
+        return walk
+
+    def mpcParameters(self) -> MPCParameters:
+        """The velocity walk's MPC parameters from the robot and the commands: the step
+        timing, the CoM height, the ZMP box (``:setfeetconstraint``; default a quarter of
+        the sole's half sizes around its centre), the feet's distance at initState and
+        step bounds from the leg's length."""
+        geo = self._geometry
+        fp = self._initial["footprints"]
+        d = math.hypot(fp["left"].x - fp["right"].x, fp["left"].y - fp["right"].y)
+        hl, hw = self._zmpBox or (geo.sole.length / 16, geo.sole.width / 8)
+        return MPCParameters(
+            comHeight=self._comHeight,
+            period=_MPC_PERIOD,
+            horizon=round(self._previewTime / _MPC_PERIOD),
+            singleSupport=self._ss,
+            doubleSupport=self._ds,
+            footHalfLength=hl,
+            footHalfWidth=hw,
+            feetDistance=d,
+            maxStepForward=0.45 * geo.legLength,
+            maxStepBackward=0.15 * geo.legLength,
+            lateralRange=(max(geo.sole.width + 0.01, 0.9 * d), max(1.5 * d, geo.sole.width + 0.02)),
+            gravity=GRAVITY,
+        )
+
     def _start(self, t: int) -> None:
         if self._initial is None:
             raise EntityError(
                 f"PatternGenerator({self.name}): trigger is true but initState() was never called"
             )
-        geo = self._geometry
-        steps = self._footprints(self._pending, "trigger") if self._pending else []
-        self._pending = []
-        self._plan = StepPlan(
-            dict(self._initial["footprints"]),
-            steps,
-            self._ss,
-            self._ds,
-            self._tStart,
-            self._tEnd,
-            self._stepHeight,
-            geo.sole,
-        )
-        gains = previewGains(self._T, self._comHeight, self._previewTime)
-        s0 = np.zeros((3, 2))
-        s0[0] = self._initial["com"][:2]
-        self._ctrl = PreviewController(gains, s0)
-        self._k = 0
+        if self._online:
+            self._walk = VelocityWalk(
+                dict(self._initial["footprints"]),
+                self._initial["com"],
+                self._geometry.sole,
+                self.mpcParameters(),
+                self._stepHeight,
+            )
+        elif self._walk is None:
+            self._walk = self._footstepWalk([])
         self._t0 = t
         self._tick = t
-        self._zmpSamples()
-        self._s0 = s0.copy()
-        self._u = self._ctrl.step(self._refs[0 : gains.F.size + 1])
 
-    def _zmpSamples(self) -> None:
-        n = self._ctrl.horizon
-        count = round(self._plan.duration / self._T) + n + 2
-        self._refs = self._plan.zmpReference(np.arange(count) * self._T)
+    def _velocity(self, v: np.ndarray) -> np.ndarray:
+        a = np.asarray(v, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise SignalTypeError(
+                f"{self.velocitydes.name}: expected (vx, vy, omega), 3 finite numbers (m/s, "
+                f"m/s, rad/s), got {a.tolist()}; the walk keeps its last command"
+            )
+        return a
 
-    def _advance(self, tau: float) -> None:
-        n = self._ctrl.horizon
-        while tau >= (self._k + 1) * self._T - 1e-12:
-            self._s0 = self._ctrl.state.copy()
-            self._k += 1
-            window = self._refs[self._k : self._k + n + 1]
-            if len(window) < n + 1:
-                window = np.vstack([window, np.repeat(self._refs[-1:], n + 1 - len(window), 0)])
-            self._u = self._ctrl.step(window)
+    def _height(self, tau: float) -> tuple[float, float, float]:
+        """The CoM's height reference and its two derivatives at ``tau``: from its height
+        at initState to ``:comheight`` along a quintic over the first
+        :data:`HEIGHT_TIME` s (the cart-table model holds a constant height: it is
+        reached before the first step), then constant."""
+        z0, z1 = float(self._initial["com"][2]), self._comHeight
+        m, dm, ddm = quintic(tau / HEIGHT_TIME)
+        d = z1 - z0
+        return z0 + d * m, d * dm / HEIGHT_TIME, d * ddm / HEIGHT_TIME**2
 
     def _holdInitial(self) -> None:
         init = self._initial
-        com = np.array([init["com"][0], init["com"][1], self._comHeight])
+        com = init["com"].copy()  # the CoM height moves to :comheight after the trigger
         self._setOutputs(com, np.zeros(3), np.zeros(3), init["footprints"], None, 0.0, 0, False)
         for side in _SIDES:  # exactly the feet read
             self._out[f"{side}foot"] = init["ankles"][side]
 
     def _setOutputs(self, com, dcom, ddcom, footprints, swing, tau, phase, inprocess) -> None:
-        geo = self._geometry
         out = self._out
         yaws = []
         for side in _SIDES:
@@ -717,35 +875,35 @@ class PatternGenerator(Entity):
             else:
                 f = footprints[side]
                 p, yaw, nu = np.array([f.x, f.y, 0.0]), np.array([f.yaw]), np.zeros(4)
-            oMs = pin.SE3(pin.utils.rpyToMatrix(0.0, 0.0, float(yaw[0])), p)
-            oMa = oMs * geo.soleToAnkle[side]
-            w = np.array([0.0, 0.0, nu[3]])
-            va = nu[:3] + np.cross(w, oMa.translation - p)
-            local = np.concatenate((oMa.rotation.T @ va, oMa.rotation.T @ w))
             weight, rate = self._startWeight(side, tau)
-            if weight:
-                # the foot as it stood at initState (a sole tilted by the ankle, a few
-                # tenths of a mm off the ground), blended into the flat plan over its
-                # first swing (module doc)
-                xi = self._initial["offsets"][side]
-                oMa = oMa * pin.exp6(weight * xi)
-                local = local + rate * xi
-            H = oMa.homogeneous
-            dH = np.zeros((4, 4))
-            dH[:3, :3] = pin.skew(w) @ oMa.rotation
-            dH[:3, 3] = va
+            yaws.append(float(yaw[0]))
+            if not nu.any() and not rate:
+                # a foot at rest: the same outputs as the last tick's if it has not moved
+                key = (p[0], p[1], p[2], yaws[-1], weight)
+                cached = self._restCache.get(side)
+                if cached is not None and cached[0] == key:
+                    out[f"{side}foot"], out[f"{side}vel"], out[f"{side}w"], out[f"{side}va"] = (
+                        cached[1]
+                    )
+                    continue
+            else:
+                key = None
+            oMa, local, w, va = self._ankle(side, p, yaw[0], nu, weight, rate)
             out[f"{side}foot"] = oMa
             out[f"{side}vel"] = local
-            out[f"dot{side}"] = dH
-            out[f"{side}H"] = H
-            yaws.append(float(yaw[0]))
-        yaw = math.atan2(sum(math.sin(a) for a in yaws), sum(math.cos(a) for a in yaws))
+            out[f"{side}w"] = w
+            out[f"{side}va"] = va
+            if key is not None:
+                self._restCache[side] = (key, (oMa, local, w, va))
+        yaw = math.atan2(
+            math.sin(yaws[0]) + math.sin(yaws[1]), math.cos(yaws[0]) + math.cos(yaws[1])
+        )
         out["com"], out["dcom"], out["ddcom"] = com, dcom, ddcom
         out["yaw"] = yaw
         out["phase"] = phase
         out["inprocess"] = inprocess
-        if self._plan is not None:
-            out["zmp"] = np.append(self._plan.zmpAt(tau), 0.0)
+        if self._walk is not None and self._t0 is not None:
+            out["zmp"] = np.append(self._walk.zmp(tau), 0.0)
         else:
             out["zmp"] = np.array([com[0], com[1], 0.0])
         if phase == 1:
@@ -755,28 +913,72 @@ class PatternGenerator(Entity):
         else:
             out.setdefault("support", 1)
 
-    def _startWeight(self, side: str, tau: float) -> tuple[float, float]:
+    def _ankle(
+        self, side: str, p: np.ndarray, yaw: float, nu: np.ndarray, weight: float, rate: float
+    ) -> tuple[pin.SE3, np.ndarray, np.ndarray, np.ndarray]:
+        """The ankle's reference placement, its velocity in itself (6), its angular and
+        linear world velocities, from the sole frame's position ``p``, ``yaw`` and
+        velocity ``nu = (dp/dt, dyaw/dt)``, and the start blend ``weight`` and its
+        ``rate`` (:meth:`_startWeight`)."""
+        # the ankle at oMs * sMa, oMs = (Rz(yaw), p); its velocity from the sole's
+        # (dp/dt, yaw rate wz): v_a = dp/dt + wz e_z x (p_a - p), w = wz e_z
+        Rz = _rotz(float(yaw))
+        sMa = self._geometry.soleToAnkle[side]
+        r = Rz @ sMa.translation
+        R = Rz @ sMa.rotation
+        oMa = pin.SE3(R, p + r)
+        wz = nu[3]
+        w = np.array([0.0, 0.0, wz])
+        va = np.array([nu[0] - wz * r[1], nu[1] + wz * r[0], nu[2]])
+        local = np.concatenate((R.T @ va, R[2] * wz))
+        if weight:
+            # the foot as it stood at initState (a sole tilted by the ankle, a few
+            # tenths of a mm off the ground), blended into the flat plan over its
+            # first swing (module doc)
+            xi = self._initial["offsets"][side]
+            oMa = oMa * pin.exp6(weight * xi)
+            local = local + rate * xi
+        return oMa, local, w, va
+
+    def referencesAt(
+        self, walk: Any, tau: float
+    ) -> tuple[np.ndarray, dict[str, pin.SE3], np.ndarray]:
+        """The references of ``walk`` at ``tau`` without the outputs: the CoM (3), the
+        ankles (side -> SE3) and the waist's rotation (3 x 3); what the dynamic filter's
+        inverse kinematics follows."""
+        x = walk.state(tau)
+        feet = walk.feet(tau)
+        ankles, yaws = {}, []
+        for side in _SIDES:
+            p, yaw, nu = feet[side]
+            weight, rate = self._startWeight(side, tau, walk)
+            ankles[side] = self._ankle(side, p, yaw[0], nu, weight, rate)[0]
+            yaws.append(float(yaw[0]))
+        yaw = math.atan2(
+            math.sin(yaws[0]) + math.sin(yaws[1]), math.cos(yaws[0]) + math.cos(yaws[1])
+        )
+        com = np.array([x[0, 0], x[0, 1], self._height(tau)[0]])
+        return com, ankles, _rotz(yaw) @ self._initial["waist"]
+
+    def _startWeight(self, side: str, tau: float, walk: Any = None) -> tuple[float, float]:
         """How much of the initial pose's offset from the flat footprint the ``side``
         foot still carries at ``tau``: 1 until its first swing, then ``1 - m(s)`` (the
         swing's own quintic, so C2) and 0 after; with its rate (1/s)."""
         if not self._initial["offsets"][side].any():
             return 0.0, 0.0
-        plan = self._plan
-        if plan is None:
+        if walk is None:
+            walk = None if self._t0 is None else self._walk
+        first = None if walk is None else walk.firstSwing(side)
+        if first is None or tau < first[0]:
             return 1.0, 0.0
-        for ph in plan.phases:
-            if ph.swing is not None and ph.swing[1].side == side:
-                if tau < ph.start:
-                    return 1.0, 0.0
-                if tau >= ph.end:
-                    return 0.0, 0.0
-                T = ph.end - ph.start
-                m, dm, _ = quintic((tau - ph.start) / T)
-                return 1.0 - m, -dm / T
-        return 1.0, 0.0
+        if tau >= first[1]:
+            return 0.0, 0.0
+        T = first[1] - first[0]
+        m, dm, _ = quintic((tau - first[0]) / T)
+        return 1.0 - m, -dm / T
 
-    @Output(INT, deps=("trigger",), withTime=True, timeDependent=True)
-    def onestepofcontrol(self, t: int, trigger: bool) -> int:
+    @Output(INT, deps=("trigger", "velocitydes"), withTime=True, timeDependent=True)
+    def onestepofcontrol(self, t: int, trigger: bool, velocity: np.ndarray) -> int:
         """The generator's step at tick t (internal: every output depends on it)."""
         if self._initial is None:
             raise EntityError(f"PatternGenerator({self.name}): read before initState()")
@@ -789,16 +991,23 @@ class PatternGenerator(Entity):
             self._start(t)
         self._tick = t
         tau = (t - self._t0) * self._dt
-        self._advance(tau)
-        x = stateAt(self._s0, self._u, tau - self._k * self._T)
-        com = np.array([x[0, 0], x[0, 1], self._comHeight])
-        dcom = np.array([x[1, 0], x[1, 1], 0.0])
-        ddcom = np.array([x[2, 0], x[2, 1], 0.0])
-        plan = self._plan
-        phase = plan.contactPhase(tau)
-        inprocess = tau < plan.duration + self._previewTime
+        walk = self._walk
+        if isinstance(walk, VelocityWalk):
+            walk.advance(tau, self._velocity(velocity))
+        x = walk.state(tau)
+        z, dz, ddz = self._height(tau)
+        com = np.array([x[0, 0], x[0, 1], z])
+        dcom = np.array([x[1, 0], x[1, 1], dz])
+        ddcom = np.array([x[2, 0], x[2, 1], ddz])
         self._setOutputs(
-            com, dcom, ddcom, plan._footprintsAt(tau), plan.feet(tau), tau, phase, inprocess
+            com,
+            dcom,
+            ddcom,
+            walk.footprints(tau),
+            walk.feet(tau),
+            tau,
+            walk.contactPhase(tau),
+            not walk.finished(tau),
         )
         return t
 
@@ -827,17 +1036,28 @@ class PatternGenerator(Entity):
         "right ankle's reference velocity in itself (m/s, rad/s), for "
         "FeaturePose.referenceVelocity",
     )
-    dotleftfootref = _o(
-        "dotleft", MATRIX, "time derivative of leftfootref's 4 x 4 matrix (1/s, m/s)"
-    )
-    dotrightfootref = _o(
-        "dotright", MATRIX, "time derivative of rightfootref's 4 x 4 matrix (1/s, m/s)"
-    )
     contactphase = _o("phase", INT, "1: left foot alone, -1: right alone, 0: both")
     SupportFoot = _o(
         "support", INT, "1: left, 0: right (in double support: the last single support's)"
     )
     inprocess = _o("inprocess", BOOL, "true while the walk's references move")
+
+    def _dot(self, side: str) -> np.ndarray:
+        out = self._out
+        dH = np.zeros((4, 4))
+        dH[:3, :3] = pin.skew(out[f"{side}w"]) @ out[f"{side}foot"].rotation
+        dH[:3, 3] = out[f"{side}va"]
+        return dH
+
+    @Output(MATRIX, deps=("onestepofcontrol",))
+    def dotleftfootref(self, _step: int) -> np.ndarray:
+        """Time derivative of leftfootref's 4 x 4 matrix (1/s, m/s)."""
+        return self._dot("left")
+
+    @Output(MATRIX, deps=("onestepofcontrol",))
+    def dotrightfootref(self, _step: int) -> np.ndarray:
+        """Time derivative of rightfootref's 4 x 4 matrix (1/s, m/s)."""
+        return self._dot("right")
 
     @Output(BOOL, deps=("onestepofcontrol",))
     def leftfootcontact(self, _step: int) -> bool:
@@ -873,7 +1093,7 @@ class PatternGenerator(Entity):
         ``position``'s free flyer, if plugged; else level) turned by the feet's mean yaw;
         translation the CoM reference's (the rotation is what a waist orientation task
         reads)."""
-        R = pin.utils.rpyToMatrix(self._rpy()) @ self._initial["waist"]
+        R = _rotz(self._out["yaw"]) @ self._initial["waist"]
         return pin.SE3(R, self._out["com"].copy())
 
     @Output(VECTOR, deps=("onestepofcontrol",))
@@ -904,8 +1124,31 @@ class PatternGenerator(Entity):
     # -- what the checks and demos read ----------------------------------------------
     @property
     def plan(self) -> StepPlan | None:
-        """The walk's :class:`~sotpy.walking.plan.StepPlan` (None before the trigger)."""
-        return self._plan
+        """The footstep walk's :class:`~sotpy.walking.plan.StepPlan` (None before steps
+        are given); for a velocity walk, a plan of the footprints stepped on so far."""
+        w = self._walk
+        if isinstance(w, VelocityWalk):
+            return w.plan(dict(self._initial["footprints"]), self._now())
+        return None if w is None else w.plan
+
+    @property
+    def initialConfiguration(self) -> np.ndarray:
+        """The robot's q at initState (``position``; half-sitting when not plugged)."""
+        if self._initial is None:
+            raise EntityError(f"PatternGenerator({self.name}): initState() was not called")
+        return self._initial["q"].copy()
+
+    @property
+    def walk(self) -> FootstepWalk | VelocityWalk | None:
+        """The walk being run (:mod:`sotpy.walking.walks`), None before it is planned."""
+        return self._walk
+
+    @property
+    def steppedFootprints(self) -> list[Footprint]:
+        """The two initial footprints, then every one stepped on (or planned), in order."""
+        fp = self.initialFootprints
+        steps = [] if self._walk is None else self._walk.steps()
+        return [fp["left"], fp["right"], *steps]
 
     @property
     def initialFootprints(self) -> dict[str, Footprint]:
@@ -958,6 +1201,10 @@ _PARSERS: dict[str, Callable[[PatternGenerator, str, list[str]], None]] = {
     ":walkmode": PatternGenerator._cmdWalkMode,
     ":SetAlgoForZmpTrajectory": PatternGenerator._cmdAlgo,
     ":stepseq": PatternGenerator._cmdStepSeq,
-    ":useDynamicFilter": _flag("Kajita's second stage (:useDynamicFilter)"),
+    ":HerdtOnline": PatternGenerator._cmdOnline,
+    ":NaveauOnline": PatternGenerator._cmdOnline,
+    ":setVelReference": PatternGenerator._cmdVelReference,
+    ":setfeetconstraint": PatternGenerator._cmdFeetConstraint,
+    ":useDynamicFilter": PatternGenerator._cmdDynamicFilter,
     ":feedBackControl": _flag("jrl-walkgen's state feedback (:feedBackControl)"),
 }
