@@ -1,9 +1,11 @@
 """The SoT's kinematic walk: a PatternGenerator plans 15 steps, the stack follows it.
 
-    python examples/humanoid_walk.py [--robot talos|nao] [--plot walk.png] [--save walk.npz]
+    python examples/humanoid_walk.py [--robot talos|romeo|nao] [--dynamic-filter]
+                                     [--plot walk.png] [--save walk.npz]
 
 (with the virtual environment of the README: ``.venv/bin/python examples/...``). The
-same story is ``sotpy demo talos-walk`` (``nao-walk``); docs/walking.md walks through it.
+same story is ``sotpy demo talos-walk`` (``romeo-walk``, ``nao-walk``; ``--online`` for the
+walk driven by a velocity); docs/walking.md walks through it.
 The graph is built below in plain sight; the checks of the motion (the multibody ZMP
 from Pinocchio, the soles' own motion) are :class:`sotpy.demos.walk.WalkLog`.
 """
@@ -18,7 +20,10 @@ from sotpy.tasks import Task
 from sotpy.walking import PatternGenerator
 
 parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-parser.add_argument("--robot", default="talos", help="talos or nao")
+parser.add_argument("--robot", default="talos", help="talos, romeo or nao")
+parser.add_argument(
+    "--dynamic-filter", action="store_true", help="Kajita's second stage (a few s of planning)"
+)
 parser.add_argument("--plot", metavar="PATH", help="save the top view and the ZMP margin (PNG)")
 parser.add_argument("--save", metavar="PATH", help="save t, q, v, phases, footprints (.npz)")
 args = parser.parse_args()
@@ -42,6 +47,8 @@ for line in (
     pg.parseCmd(line)
 if gait.comHeight is not None:
     pg.parseCmd(f":comheight {gait.comHeight}")
+if args.dynamic_filter:
+    pg.parseCmd(":useDynamicFilter true")  # made when the steps are given, below
 plug(robot.dynamic.position, pg.position)
 plug(robot.dynamic.com, pg.com)
 plug(robot.dynamic.signal("left-ankle"), pg.leftfootcurrentpos)

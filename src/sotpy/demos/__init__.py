@@ -714,7 +714,7 @@ def collision_run(args: argparse.Namespace) -> int:
 
 
 #: The robots of ``sotpy demo <robot>-walk``.
-WALK_ROBOTS = ("talos", "nao")
+WALK_ROBOTS = ("talos", "romeo", "nao")
 
 
 def walk_options(parser: argparse.ArgumentParser, robot: str) -> None:
@@ -750,6 +750,17 @@ def walk_options(parser: argparse.ArgumentParser, robot: str) -> None:
         "--dt", type=positive_float, default=1e-3, metavar="S", help="control period, s (1e-3)"
     )
     parser.add_argument(
+        "--online",
+        action="store_true",
+        help="walk from velocitydes (the walking MPC): 0.1, 0.2, 0.3 m/s, a turn, a stop",
+    )
+    parser.add_argument(
+        "--dynamic-filter",
+        action="store_true",
+        help="Kajita's second stage: the CoM corrected for the whole body's ZMP (a few s "
+        "of planning)",
+    )
+    parser.add_argument(
         "--plot", metavar="PATH", help="save the top view and the ZMP's margin (PNG)"
     )
     parser.add_argument(
@@ -765,11 +776,19 @@ def walk_run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from ..errors import SotpyError
-    from .walk import GAITS, run_walk
+    from .walk import GAITS, ONLINE_GAITS, run_walk
 
     name = f"{args.walk_robot}-walk"
+    table = ONLINE_GAITS if args.online else GAITS
+    if args.online:  # the online gait's timing unless the options changed it
+        defaults = GAITS[args.walk_robot]
+        base = ONLINE_GAITS[args.walk_robot]
+        if args.single_support == defaults.ss:
+            args.single_support = base.ss
+        if args.double_support == defaults.ds:
+            args.double_support = base.ds
     gait = replace(
-        GAITS[args.walk_robot],
+        table[args.walk_robot],
         steps=args.steps,
         length=args.step_length,
         ss=args.single_support,
@@ -780,6 +799,8 @@ def walk_run(args: argparse.Namespace) -> int:
             args.walk_robot,
             gait=gait,
             dt=args.dt,
+            online=args.online,
+            dynamicFilter=args.dynamic_filter,
             plot=args.plot,
             save=args.save,
             viewer=args.viewer,
