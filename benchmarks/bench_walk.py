@@ -8,8 +8,15 @@ whole walking tick on Talos (generator, stack, device) against the same graph st
   (the plan's feet, the cubic CoM, the ZMP reference; a preview step every 5th tick);
 * **walking tick**: ``device.increment(1 ms)`` of the walking graph (docs/walking.md):
   the generator, the four-level SOT and the device, over the 15-step walk;
+* **online walking tick**: the velocity walk (``:HerdtOnline``, 0.2 then 0.3 m/s
+  turning), with the **MPC replan** (one solve every 100 ms) timed inside it;
+* **PlaCo's walking IK tick** (``--placo``): the same references replayed through PlaCo's
+  ``KinematicsSolver`` on the same Talos (``benchmarks/_placo_walk.py``): its
+  ``solve(True)`` and ``update_kinematics()``, against sotpy's walking tick less its
+  generator (the kinematics, tasks, SOT and device);
 * **standing tick**: the same graph with the generator not triggered (the reference:
-  what the walk adds is the generator and the moving references).
+  what the walk adds is the generator and the moving references);
+* the dynamic filter's time on the 15-step plan (once, when the steps are given).
 
 Reported: median, p99 and worst (us), and the ratio of the walking tick's median to the
 standing tick's. Usage::
@@ -55,7 +62,11 @@ def preview_tick(n: int = 20000) -> tuple[float, float, float]:
     return _stats(out)
 
 
-def walking_ticks(seconds: float | None) -> dict[str, tuple[float, float, float]]:
+def walking_ticks(
+    seconds: float | None, references: list | None = None
+) -> dict[str, tuple[float, float, float]]:
+    """The footstep walk's tick and its generator's share; ``references`` (a list)
+    receives each tick's references, for PlaCo's replay."""
     pool.clear()
     robot = load_robot("talos", prefix="bw")
     graph = build_walk(robot, GAITS["talos"], 1e-3, "bw")
@@ -68,6 +79,15 @@ def walking_ticks(seconds: float | None) -> dict[str, tuple[float, float, float]
         t0 = time.perf_counter()
         robot.device.increment(1e-3)
         walk.append(time.perf_counter() - t0)
+        if references is not None:
+            references.append(
+                {
+                    "com": pg.comref.value,
+                    "left": pg.leftfootref.value.homogeneous,
+                    "right": pg.rightfootref.value.homogeneous,
+                    "waist": pg.waistattitudematrixabsolute.value.rotation,
+                }
+            )
     # the generator alone, on a fresh one stepped by hand at the same ticks
     pool.clear()
     robot = load_robot("talos", prefix="bg")
@@ -85,6 +105,50 @@ def walking_ticks(seconds: float | None) -> dict[str, tuple[float, float, float]
     return {"walking tick": _stats(walk), "generator read": _stats(gen)}
 
 
+def online_ticks(seconds: float) -> dict[str, tuple[float, float, float]]:
+    """The velocity walk: its whole tick, and the MPC's solves within it."""
+    from sotpy.demos.walk import ONLINE_GAITS
+    from sotpy.walking import mpc as mpc_module
+
+    pool.clear()
+    robot = load_robot("talos", prefix="bo")
+    graph = build_walk(robot, ONLINE_GAITS["talos"], 1e-3, "bo", online=True)
+    pg = graph["pg"]
+    pg.velocitydes.value = np.array([0.2, 0.0, 0.0])
+    pg.trigger.value = True
+    solves: list[float] = []
+    original = mpc_module.VelocityMPC.solve
+
+    def timed(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            solves.append(time.perf_counter() - t0)
+
+    mpc_module.VelocityMPC.solve = timed
+    try:
+        ticks, out = round(seconds / 1e-3), []
+        for k in range(ticks):
+            if k == ticks // 2:
+                pg.velocitydes.value = np.array([0.3, 0.0, 0.1])
+            t0 = time.perf_counter()
+            robot.device.increment(1e-3)
+            out.append(time.perf_counter() - t0)
+    finally:
+        mpc_module.VelocityMPC.solve = original
+    return {"online walking tick": _stats(out), "MPC replan (N = 16)": _stats(solves)}
+
+
+def filter_time() -> float:
+    """The dynamic filter on the 15-step Talos plan (s, once)."""
+    pool.clear()
+    robot = load_robot("talos", prefix="bf")
+    t0 = time.perf_counter()
+    build_walk(robot, GAITS["talos"], 1e-3, "bf", dynamicFilter=True)
+    return time.perf_counter() - t0
+
+
 def standing_tick(ticks: int) -> tuple[float, float, float]:
     pool.clear()
     robot = load_robot("talos", prefix="bs")
@@ -100,11 +164,28 @@ def standing_tick(ticks: int) -> tuple[float, float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--quick", action="store_true", help="3 s of the walk")
+    parser.add_argument(
+        "--placo",
+        action="store_true",
+        help="replay the walk's references through PlaCo's KinematicsSolver "
+        "(benchmarks/_placo_walk.py; PlaCo in its own venv: PLACO_PYTHON=...)",
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     print(machine_line())
     rows = {"preview tick (N = 320, 2 axes)": preview_tick(2000 if args.quick else 20000)}
-    rows.update(walking_ticks(3.0 if args.quick else None))
+    references: list | None = [] if args.placo else None
+    rows.update(walking_ticks(3.0 if args.quick else None, references))
+    if args.placo:
+        from _placo_walk import placo_walk_ik
+
+        placo = placo_walk_ik(references)
+        rows[f"PlaCo {placo['placo_version']} walking IK tick"] = _stats(list(placo["times"]))
+        print(
+            f"PlaCo tracking: CoM {placo['com_error'] * 1e3:.4f} mm, "
+            f"ankles {placo['feet_error'] * 1e3:.4f} mm"
+        )
+    rows.update(online_ticks(4.0 if args.quick else 12.0))
     n = 3000 if args.quick else 14000
     rows["standing tick (reference)"] = standing_tick(n)
     print(f"{'':34} {'median':>8} {'p99':>8} {'worst':>8}  (us)")
@@ -112,6 +193,11 @@ def main() -> None:
         print(f"{name:34} {med:8.1f} {p99:8.1f} {worst:8.1f}")
     ratio = rows["walking tick"][0] / rows["standing tick (reference)"][0]
     print(f"walking tick / standing tick (median): {ratio:.2f}")
+    if not args.quick:
+        seconds = filter_time()
+        print(
+            f"dynamic filter, 15 steps on Talos (once, when the steps are given): {seconds:.2f} s"
+        )
 
 
 if __name__ == "__main__":
