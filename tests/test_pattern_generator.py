@@ -291,3 +291,35 @@ def test_a_sot_walking_script_sets_up_its_generator_under_sotpy_run():
     assert "steps pending 3" in r.stdout
     assert "ZMPShiftParameters 0.015 0.015 0.015 0.015: recorded, no effect" in r.stdout
     assert "did you mean :TimeDistributionParameters" in r.stderr
+
+
+def test_a_shell_user_walks_the_robot_live():
+    """As in ``sotpy shell``: the loop runs the walking graph in real time while a
+    command (holding the pool's lock, as the shell's do) changes ``velocitydes``."""
+    import time
+
+    from sotpy.demos.walk import ONLINE_GAITS, build_walk
+    from sotpy.graph import pool
+    from sotpy.shell import makeNamespace
+
+    ns = makeNamespace("talos")
+    robot, loop = ns["robot"], ns["loop"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pg = build_walk(robot, ONLINE_GAITS["talos"], 1e-3, "live", online=True)["pg"]
+        pg.trigger.value = True
+        loop.start()
+        try:
+            time.sleep(0.5)
+            with pool.lock:  # what a shell command does
+                pg.velocitydes.value = np.array([0.2, 0.0, 0.0])
+                x0, t0 = robot.dynamic.com.value[0], pg.walkTime
+            time.sleep(4.0)
+            with pool.lock:
+                x1, t1 = robot.dynamic.com.value[0], pg.walkTime
+                pg.velocitydes.value = np.zeros(3)
+        finally:
+            loop.stop()
+    assert t1 - t0 > 2.0  # the loop ticked (at least half of real time on a busy machine)
+    assert x1 - x0 > 0.1 * (t1 - t0)  # it walked forward: the MPC's start, then 0.2 m/s
+    assert pg.walk.fault is None

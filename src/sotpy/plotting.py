@@ -478,7 +478,7 @@ def plot_walk(
     for f in rows:
         poly = _closed(f.point(corners))
         top.plot(poly[:, 0], poly[:, 1], color="C0" if f.side == "left" else "C3", lw=0.8)
-    zref = plan.zmpReference(t)
+    zref = result["zmp_reference"]
     top.plot(zref[:, 0], zref[:, 1], color="0.4", lw=0.8, label="ZMP reference")
     top.plot(m["zmp"][:, 0], m["zmp"][:, 1], color="C2", lw=0.6, label="multibody ZMP")
     top.plot(m["com"][:, 0], m["com"][:, 1], color="k", lw=1.2, label="CoM")

@@ -228,6 +228,7 @@ class WalkLog:
         self.ankleref = {s: np.zeros((ticks + 1, 3)) for s in ("left", "right")}
         self.phase = np.zeros(ticks + 1, dtype=int)
         self.planned = np.zeros((ticks + 1, 2))  # the plan's cart-table ZMP
+        self.zmpref = np.zeros((ticks + 1, 2))  # the generator's ZMP reference
         self.n = 0
         self._store()
 
@@ -350,6 +351,7 @@ class WalkLog:
             "motion": m,
             "margin_series": margin,
             "cart_zmp": cart,
+            "zmp_reference": self.zmpref[:n].copy(),
             "onGround": onGround,
             "distance": distance,
             "planned_distance": float(

@@ -704,8 +704,12 @@ class FeaturePose(FeatureAbstract):
 
     def _poseErrordot(self, rel: pin.SE3, R: np.ndarray, nu: np.ndarray) -> np.ndarray:
         v, w = nu[:3], nu[3:]
+        p = rel.translation
         out = np.empty(6)
-        out[:3] = -np.cross(w, rel.translation) - v
+        # -(w x p) - v, written out (numpy's cross costs 15 us on 3-vectors)
+        out[0] = -(w[1] * p[2] - w[2] * p[1]) - v[0]
+        out[1] = -(w[2] * p[0] - w[0] * p[2]) - v[1]
+        out[2] = -(w[0] * p[1] - w[1] * p[0]) - v[2]
         out[3:] = -pin.Jlog3(R) @ (R.T @ w)
         return out
 

@@ -248,6 +248,7 @@ class StepPlan:
             self.final = feet
             self.duration = self.tStart
             self._starts = np.zeros(1)
+            self._last = None
             return
         first = "right" if self.steps[0].side == "left" else "left"
         phases.append(
@@ -275,6 +276,7 @@ class StepPlan:
         self.final = feet
         self.duration = t
         self._starts = np.array([p.start for p in phases])
+        self._last: Phase | None = None
 
     def extend(self, steps: Sequence[Footprint], now: float) -> None:
         """Append ``steps`` to the plan (online steps); the plan before ``now`` (s) is
@@ -293,8 +295,12 @@ class StepPlan:
         """The phase containing ``t`` (the last one after the end, the first before 0)."""
         if not self.steps:
             return self.phases[0]
+        last = self._last  # a tick asks several times for the same phase: check it first
+        if last is not None and last.start <= t < last.end:
+            return last
         i = int(np.searchsorted(self._starts, t, side="right")) - 1
-        return self.phases[min(max(i, 0), len(self.phases) - 1)]
+        self._last = self.phases[min(max(i, 0), len(self.phases) - 1)]
+        return self._last
 
     def contactPhase(self, t: float) -> int:
         """SoT's ``contactphase``: 1 on the left foot alone, -1 on the right, 0 both."""
