@@ -216,3 +216,38 @@ def test_bad_parameters_are_refused():
 def test_solve_time_sanity():
     sim = simulate(params(), lambda t: (0.2, 0.0, 0.1), 4.0)
     assert np.median(sim.solveTime) < 0.1
+
+
+def test_a_walk_whose_command_has_no_plan_stops_and_says_why():
+    """VelocityWalk (the generator's online walk): a command the MPC cannot plan (3 m/s
+    sideways) is replaced by a stop, or by standing in double support where the feet
+    are, said in ``fault``; the ZMP stays over the soles; a command that can be planned
+    walks again."""
+    from sotpy.walking.plan import Footprint, Sole
+    from sotpy.walking.walks import VelocityWalk
+
+    p = params()
+    feet = {
+        "left": Footprint(0.0, 0.085, 0.0, "left"),
+        "right": Footprint(0.0, -0.085, 0.0, "right"),
+    }
+    walk = VelocityWalk(feet, np.zeros(2), Sole(0.2, 0.12), p, 0.05)
+
+    def command(t: float) -> np.ndarray:
+        if t < 3.0:
+            return np.array([0.2, 0.0, 0.0])
+        return np.array([0.0, 3.0, 0.0]) if t < 5.0 else np.array([0.1, 0.0, 0.0])
+
+    modes = []
+    for k in range(90):  # 9 s
+        t = k * p.period
+        walk.advance(t, command(t))
+        modes.append(walk.mode)
+        z = walk.zmp(t)
+        soles = list(walk.footprints(t).values())
+        assert min(np.hypot(z[0] - f.x, z[1] - f.y) for f in soles) < 0.15, (t, z)
+        if 3.5 <= t < 5.0:
+            assert walk.fault is not None and "has no plan" in walk.fault
+    assert "standing" in modes[35:50]
+    assert modes[-1] == "walking"  # walking again at 0.1 m/s
+    assert np.all(np.isfinite(walk.state(t)))

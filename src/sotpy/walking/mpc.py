@@ -89,7 +89,8 @@ anywhere while the CoM diverges).
 
 - ``"walking"``: the problem above.
 - ``"standing"``: the command is zero (all of ``|vx|, |vy|, |omega|`` below 1e-9) and the
-  other sole is given and lies side by side with the support (at ``feetDistance``
+  other sole is given and lies side by side with the support, or ``solve(stand=True)``
+  (the soles where they are) (at ``feetDistance``
   laterally, same yaw, within 1e-6 m and 1e-6 rad): no step, the ZMP in the convex hull
   of both soles at every sample, its reference their midpoint; ``footsteps`` is empty.
 - ``"stopping"``: a zero command otherwise: the next footstep is fixed side by side
@@ -97,9 +98,9 @@ anywhere while the CoM diverges).
   the hull of the two soles. If that is infeasible (too fast to stop in one step: the
   capturability row) the MPC falls back to ``"walking"`` with a zero velocity reference
   (the robot decelerates stepping) and tries to stop again at the next solve.
-- ``"starting"``: a non-zero command while standing (the soles side by side, and the
-  previous solve of this object was ``"standing"`` or ``"starting"`` on the same support,
-  or there was none): the current step is a double support to its end (the ZMP in the
+- ``"starting"``: a non-zero command while standing (both soles down, side by side or
+  where a stand left them, and the previous solve of this object was ``"standing"`` or
+  ``"starting"`` on the same support, or there was none): the current step is a double support to its end (the ZMP in the
   hull, the other sole stays down), then the other sole becomes the support (it is
   ``footsteps[0]``, fixed where it is) and the walk proceeds: the ZMP first moves over
   the foot that will carry the robot, instead of jumping there in one period. This is
@@ -378,6 +379,7 @@ class VelocityMPC:
         velocity: np.ndarray,
         otherFoot: tuple[float, float, float] | None = None,
         nextStep: tuple[float, float, float] | None = None,
+        stand: bool = False,
     ) -> MPCResult:
         """Plan the next N jerks and footsteps (module doc).
 
@@ -394,6 +396,9 @@ class VelocityMPC:
                 (the swing foot has landed early, or its target is frozen): it is then
                 fixed, and the walk's modes reduce to ``"walking"`` for this step (a zero
                 command stops at the step after).
+            stand: stand where the soles are (the ``"standing"`` mode with the ZMP in the
+                hull of both, side by side or not; needs ``otherFoot``): the fallback of
+                a walk whose commands have no plan.
 
         Raises:
             CommandError: an argument of the wrong size, non-finite, or out of range.
@@ -408,14 +413,22 @@ class VelocityMPC:
                 _array("VelocityMPC.solve", "nextStep", nextStep, (3,), "(x, y, yaw) or None")
             )
         together = other is not None and self._sideBySide(sup, supportSide, other)
-        if self._next is not None:
+        if stand:
+            if other is None:
+                raise CommandError(
+                    "VelocityMPC.solve: stand=True needs otherFoot (both soles down)"
+                )
+            modes = ["standing"]
+        elif self._next is not None:
             modes = ["walking"]
         elif np.all(np.abs(v) < _ZERO_COMMAND):
             modes = ["standing", "stopping", "walking"] if together else ["stopping", "walking"]
         else:
             resting = self._last is None or self._last == ("standing", sup, supportSide)
             resting = resting or self._last == ("starting", sup, supportSide)
-            modes = ["starting", "walking"] if together and resting else ["walking"]
+            # from rest (side by side, or where a fallback left the feet) a walk starts
+            # with a whole step in double support
+            modes = ["starting", "walking"] if other is not None and resting else ["walking"]
         failures = []
         for mode in modes:
             out = self._solveMode(mode, X0, sup, supportSide, tau, v, other)

@@ -249,23 +249,41 @@ class VelocityWalk:
         sup = self._centre(self.feetDown[self.support])
         oth = self._centre(self.feetDown[self.other]) if self.otherDown else None
         nxt = self._fixedNext(tk)
-        try:
-            res = self.mpc.solve(self.state0, sup, self.support, tau, self.velocity, oth, nxt)
-        except SolverError as exc:
-            try:
-                res = self.mpc.solve(self.state0, sup, self.support, tau, np.zeros(3), oth, nxt)
-                self.fault = f"the command {self.velocity.tolist()} has no plan ({exc}); stopping"
-            except SolverError as exc2:
-                res = None
-                self.fault = f"no plan, not even a stop ({exc2}); keeping the last plan"
+        res = self._solve(sup, tau, oth, nxt)
         if res is None:
             self.jerk = self.spare.pop(0) if self.spare else np.zeros(2)
         else:
             self.result, self.mode = res, res.reason
             self.jerk = res.jerk[0]
             self.spare = list(res.jerk[1:])
-        self._planSwing(tk)
+            self._planSwing(tk)  # (without a new plan a swing keeps its target)
         self.k += 1
+
+    def _solve(self, sup, tau, oth, nxt) -> MPCResult | None:
+        """The command's plan; else a stop's; else, both soles down, standing on them
+        where they are (in double support, safely stopped); else None (a foot in the
+        air: the last plan goes on). :attr:`fault` says which and why."""
+        solve = self.mpc.solve
+        try:
+            return solve(self.state0, sup, self.support, tau, self.velocity, oth, nxt)
+        except SolverError as exc:
+            why = f"the command {self.velocity.tolist()} has no plan ({exc})"
+        try:
+            res = solve(self.state0, sup, self.support, tau, np.zeros(3), oth, nxt)
+            self.fault = f"{why}; stopping"
+            return res
+        except SolverError:
+            pass
+        if oth is not None:
+            try:
+                res = solve(self.state0, sup, self.support, tau, np.zeros(3), oth, stand=True)
+                self.fault = f"{why}; no stop either: standing in double support where the feet are"
+                self.swing = None
+                return res
+            except SolverError:
+                pass
+        self.fault = f"{why}; no stop either, a foot in the air: the last plan goes on"
+        return None
 
     def _events(self, tk: float) -> None:
         """What happened at ``tk``: the swing foot lands one MPC period before the step's
