@@ -101,8 +101,9 @@ anywhere while the CoM diverges).
 - ``"starting"``: a non-zero command while standing (both soles down, side by side or
   where a stand left them, and the previous solve of this object was ``"standing"`` or
   ``"starting"`` on the same support, or there was none): the current step is a double
-  support to its end (the ZMP in the hull, the other sole stays down), then the other sole becomes the support (it is
-  ``footsteps[0]``, fixed where it is) and the walk proceeds: the ZMP first moves over
+  support to its end (the ZMP in the hull, the other sole stays down), then the other
+  sole becomes the support (it is ``footsteps[0]``, fixed where it is) and the walk
+  proceeds: the ZMP first moves over
   the foot that will carry the robot, instead of jumping there in one period. This is
   the only state the object keeps (:meth:`VelocityMPC.reset` forgets it).
 
