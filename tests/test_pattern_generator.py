@@ -323,3 +323,51 @@ def test_a_shell_user_walks_the_robot_live():
     assert t1 - t0 > 2.0  # the loop ticked (at least half of real time on a busy machine)
     assert x1 - x0 > 0.1 * (t1 - t0)  # it walked forward: the MPC's start, then 0.2 m/s
     assert pg.walk.fault is None
+
+
+@pytest.mark.parametrize("mode", ["steps", "online"])
+def test_a_sot_walking_script_walks_under_sotpy_run(tmp_path, mode):
+    """tests/sot_scripts/talos_walk.py, written as SoT users write theirs (sot-core's
+    meta-tasks on the generator's outputs, jrl-walkgen's commands), under ``sotpy run``:
+    judged from its saved configurations alone (the multibody ZMP inside the soles on the
+    ground, no slip, the feet where the steps put them)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sotpy.demos.walk import contactChecks, motionOf
+
+    script = Path(__file__).resolve().parent / "sot_scripts" / "talos_walk.py"
+    env = {**os.environ, "PYTHONPATH": str(script.parents[2] / "src")}
+    seconds = "8.0" if mode == "steps" else "7.0"
+    r = subprocess.run(
+        [sys.executable, "-m", "sotpy", "run", str(script), str(tmp_path), mode, seconds],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
+    assert r.returncode == 0, r.stderr
+    saved = np.load(tmp_path / "walk.npz")
+    q, dt = saved["q"], float(saved["dt"])
+    robot = load_robot("talos", prefix="check")
+    model = robot.model
+    v = np.array([pin_difference(model, q[k - 1], q[k]) / dt for k in range(1, len(q))])
+    m = motionOf(robot, q[1:], v, dt)
+    c = contactChecks(m, dt, settle=0.2)
+    assert c["ticks_outside"] == 0 and c["margin"] >= 0.01
+    assert c["slip"] <= 1e-4
+    start = {s: m["sole"][s][0, 0] for s in ("left", "right")}
+    end = {s: m["sole"][s][-1, 0] for s in ("left", "right")}
+    if mode == "steps":  # 0.2 m left, 0.2 m right, then the feet closed: 0.4 m each
+        for s in ("left", "right"):
+            assert end[s] - start[s] == pytest.approx(0.4, abs=1e-3)
+    else:  # 0.1 m/s for 7 s, the start's double support included
+        assert min(end[s] - start[s] for s in end) > 0.25
+
+
+def pin_difference(model, q0, q1):
+    import pinocchio
+
+    return pinocchio.difference(model, q0, q1)

@@ -58,6 +58,8 @@ __all__ = [
     "Gait",
     "WalkLog",
     "build_walk",
+    "contactChecks",
+    "motionOf",
     "run_walk",
     "stepSequence",
     "velocityTracking",
@@ -135,6 +137,93 @@ def zmpMargin(point: np.ndarray, corners: np.ndarray) -> float:
     d = np.roll(hull, -1, axis=0) - hull
     n = np.stack((d[:, 1], -d[:, 0]), axis=1) / np.linalg.norm(d, axis=1)[:, None]
     return float(np.min(np.einsum("ij,ij->i", n, hull) - n @ point))
+
+
+def motionOf(robot: Any, q: np.ndarray, v: np.ndarray, dt: float) -> dict[str, Any]:
+    """A motion's own quantities at every tick, from its configurations ``q`` and
+    velocities ``v`` (``ticks x nq``, ``ticks x nv``, every ``dt`` s) on ``robot``'s
+    Pinocchio model (module doc): ``com``, ``zmp`` (multibody; NaN at the first tick),
+    ``sole`` and ``ankle`` positions and the sole ``corners`` (xy) per side, the waist's
+    ``yaw``."""
+    model = robot.model
+    data = model.createData()
+    n = len(q)
+    ids = {s: model.getFrameId(robot.feet[s].frame) for s in ("left", "right")}
+    ankles = {s: model.getFrameId(robot.opPoints[f"{s}-ankle"]) for s in ("left", "right")}
+    corners = {s: robot.feet[s].corners for s in ("left", "right")}
+    out: dict[str, Any] = {
+        "com": np.zeros((n, 3)),
+        "zmp": np.full((n, 2), np.nan),
+        "sole": {s: np.zeros((n, 3)) for s in ids},
+        "ankle": {s: np.zeros((n, 3)) for s in ids},
+        "corners": {s: np.zeros((n, 4, 2)) for s in ids},
+        "yaw": np.zeros(n),
+    }
+    mg = np.array([0.0, 0.0, 9.81])
+    for k in range(n):
+        a = (v[k] - v[k - 1]) / dt if k else np.zeros(model.nv)
+        pin.computeCentroidalMomentumTimeVariation(model, data, q[k], v[k], a)
+        pin.updateFramePlacements(model, data)
+        c = data.com[0]
+        f = data.dhg.linear + data.mass[0] * mg
+        tau = data.dhg.angular
+        out["com"][k] = c
+        R = data.oMi[1].rotation  # the root joint (the waist)
+        out["yaw"][k] = math.atan2(R[1, 0], R[0, 0])
+        if k:
+            out["zmp"][k] = (
+                c[0] - (tau[1] + c[2] * f[0]) / f[2],
+                c[1] + (tau[0] - c[2] * f[1]) / f[2],
+            )
+        for s, fid in ids.items():
+            M = data.oMf[fid]
+            out["sole"][s][k] = M.translation
+            out["ankle"][s][k] = data.oMf[ankles[s]].translation
+            out["corners"][s][k] = (corners[s] @ M.rotation.T + M.translation)[:, :2]
+    return out
+
+
+def contactChecks(m: dict[str, Any], dt: float, settle: float = 0.2) -> dict[str, Any]:
+    """From a motion (:func:`motionOf`): which soles are on the ground at each tick
+    (``onGround``: below :data:`CONTACT_HEIGHT`), the multibody ZMP's margin to their
+    hull at each tick (``margin_series``, m), its smallest after ``settle`` s
+    (``margin``) and the ticks it is outside (``ticks_outside``), the largest ``slip``
+    of a sole while on the ground (m) and where each stay on the ground ended
+    (``landed``: side -> list of xy)."""
+    n = len(m["com"])
+    t = np.arange(n) * dt
+    onGround = {s: m["sole"][s][:, 2] < CONTACT_HEIGHT for s in ("left", "right")}
+    margin = np.full(n, np.nan)
+    for k in range(1, n):
+        sides = [s for s in ("left", "right") if onGround[s][k]]
+        if sides:
+            pts = np.concatenate([m["corners"][s][k] for s in sides])
+            margin[k] = zmpMargin(m["zmp"][k], pts)
+    slip = 0.0
+    landed: dict[str, list[np.ndarray]] = {"left": [], "right": []}
+    for s in ("left", "right"):
+        down = onGround[s]
+        k = 0
+        while k < n:
+            if down[k]:
+                j = k
+                while j < n and down[j]:
+                    j += 1
+                xy = m["sole"][s][k:j, :2]
+                slip = max(slip, float(np.max(np.linalg.norm(xy - xy[0], axis=1))))
+                landed[s].append(xy[-1])
+                k = j
+            else:
+                k += 1
+    after = t >= settle
+    return {
+        "onGround": onGround,
+        "margin_series": margin,
+        "margin": float(np.nanmin(margin[after])) if np.any(after) else math.nan,
+        "ticks_outside": int(np.sum(~(margin[after] > 0))),
+        "slip": slip,
+        "landed": landed,
+    }
 
 
 def build_walk(
@@ -251,44 +340,9 @@ class WalkLog:
         self._store()
 
     def motion(self) -> dict[str, np.ndarray]:
-        """The motion's own quantities at every tick: ``com``, ``zmp`` (multibody),
-        ``ankle`` and ``sole`` positions per side, ``corners`` of each sole."""
-        robot, n, dt = self.robot, self.n + 1, self.dt
-        model = robot.model
-        data = model.createData()
-        ids = {s: model.getFrameId(robot.feet[s].frame) for s in ("left", "right")}
-        ankles = {s: model.getFrameId(robot.opPoints[f"{s}-ankle"]) for s in ("left", "right")}
-        corners = {s: robot.feet[s].corners for s in ("left", "right")}
-        out: dict[str, Any] = {
-            "com": np.zeros((n, 3)),
-            "zmp": np.full((n, 2), np.nan),
-            "sole": {s: np.zeros((n, 3)) for s in ids},
-            "ankle": {s: np.zeros((n, 3)) for s in ids},
-            "corners": {s: np.zeros((n, 4, 2)) for s in ids},
-            "yaw": np.zeros(n),
-        }
-        mg = np.array([0.0, 0.0, 9.81])
-        for k in range(n):
-            a = (self.v[k] - self.v[k - 1]) / dt if k else np.zeros(model.nv)
-            pin.computeCentroidalMomentumTimeVariation(model, data, self.q[k], self.v[k], a)
-            pin.updateFramePlacements(model, data)
-            c = data.com[0]
-            f = data.dhg.linear + data.mass[0] * mg
-            tau = data.dhg.angular
-            out["com"][k] = c
-            R = data.oMi[1].rotation  # the root joint (the waist)
-            out["yaw"][k] = math.atan2(R[1, 0], R[0, 0])
-            if k:
-                out["zmp"][k] = (
-                    c[0] - (tau[1] + c[2] * f[0]) / f[2],
-                    c[1] + (tau[0] - c[2] * f[1]) / f[2],
-                )
-            for s, fid in ids.items():
-                M = data.oMf[fid]
-                out["sole"][s][k] = M.translation
-                out["ankle"][s][k] = data.oMf[ankles[s]].translation
-                out["corners"][s][k] = (corners[s] @ M.rotation.T + M.translation)[:, :2]
-        return out
+        """:func:`motionOf` the recorded ticks."""
+        n = self.n + 1
+        return motionOf(self.robot, self.q[:n], self.v[:n], self.dt)
 
     def report(self, settle: float = 0.2) -> dict[str, Any]:
         """The checks of the module doc, as numbers and verdicts: ``distance`` (m, and
@@ -300,31 +354,14 @@ class WalkLog:
         t = np.arange(n) * dt
         pg = self.pg
         cart = self.planned[:n]
-        onGround = {s: m["sole"][s][:, 2] < CONTACT_HEIGHT for s in ("left", "right")}
-        margin = np.full(n, np.nan)
-        for k in range(1, n):
-            sides = [s for s in ("left", "right") if onGround[s][k]]
-            if sides:
-                pts = np.concatenate([m["corners"][s][k] for s in sides])
-                margin[k] = zmpMargin(m["zmp"][k], pts)
+        contact = contactChecks(m, dt, settle)
+        onGround, margin, slip, landed = (
+            contact["onGround"],
+            contact["margin_series"],
+            contact["slip"],
+            contact["landed"],
+        )
         after = t >= settle
-        # slip: within each stay on the ground, the largest horizontal move from landing
-        slip = 0.0
-        landed: dict[str, list[np.ndarray]] = {"left": [], "right": []}
-        for s in ("left", "right"):
-            g_ = onGround[s]
-            k = 0
-            while k < n:
-                if g_[k]:
-                    j = k
-                    while j < n and g_[j]:
-                        j += 1
-                    xy = m["sole"][s][k:j, :2]
-                    slip = max(slip, float(np.max(np.linalg.norm(xy - xy[0], axis=1))))
-                    landed[s].append(xy[-1])
-                    k = j
-                else:
-                    k += 1
         stepped = pg.steppedFootprints
         planned = {"left": [], "right": []}
         for f in stepped:
@@ -344,8 +381,7 @@ class WalkLog:
             for s in ("left", "right")
         )
         dz = np.linalg.norm(m["zmp"][after] - cart[after], axis=1)
-        minMargin = float(np.nanmin(margin[after])) if np.any(after) else math.nan
-        outside = int(np.sum(~(margin[after] > 0)))
+        minMargin, outside = contact["margin"], contact["ticks_outside"]
         result = {
             "t": t,
             "motion": m,

@@ -33,11 +33,14 @@ the tick's time. Every walk mode maps onto this: the step sequences of ``:stepse
 they track the same footsteps). See docs/walking.md for the parseCmd table.
 
 **Time.** The generator's time is the graph's tick: ``t_walk = (t - t0) dt`` with ``t0``
-the first tick at which ``trigger`` is read true and ``dt`` the control period
-(``setTimeStep``, default 1 ms: five ticks per 5 ms sample, as the C++ entity assumes).
-Before the trigger every output holds the initial state; after the plan's end and the
-CoM's settling (one preview time), ``inprocess`` becomes false and the outputs hold the
-final state. A ``trigger`` set false during a walk freezes the references where they are.
+the first tick at which ``trigger`` is read true and ``dt`` the control period: the time
+step of the robot's device (``buildModel``), or ``setTimeStep``'s; 1 ms, as the C++
+entity assumes (five ticks per 5 ms sample), when the device has not ticked yet. A
+device ticking at another period than the clock assumes is refused with an error: the
+walk would run slower or faster than the robot. Before the trigger every output holds
+the initial state; after the plan's end and the CoM's settling (one preview time),
+``inprocess`` becomes false and the outputs hold the final state. A ``trigger`` set false
+during a walk freezes the references where they are.
 
 **Bad input** is refused before anything moves, with a :class:`~sotpy.errors.CommandError`
 naming the entity, the command and what was expected: a step the robot cannot take
@@ -224,6 +227,8 @@ class PatternGenerator(Entity):
     def __init__(self, name: str) -> None:
         super().__init__(name)
         self._geometry: RobotGeometry | None = None
+        self._device: Any = None  # the robot's Device: its time step is the control period
+        self._dtSet = False
         self._T = 0.005
         self._dt = 0.001
         self._previewTime = 1.6
@@ -272,6 +277,7 @@ class PatternGenerator(Entity):
                 )
             robot = robots[0]
         self._geometry = robotGeometry(robot)
+        self._device = robot.device
 
     def _requireModel(self, what: str) -> RobotGeometry:
         if self._geometry is None:
@@ -462,7 +468,9 @@ class PatternGenerator(Entity):
 
     @command
     def getTimeStep(self) -> float:
-        """The control period ``dt`` (s): the time between two ticks."""
+        """The control period ``dt`` (s): the time between two ticks. Default: the time
+        step of the robot's device (``buildModel``), read at the walk's first tick; 1 ms
+        (the C++ entity's five ticks per 5 ms sample) when it has none yet."""
         return self._dt
 
     @command
@@ -476,6 +484,7 @@ class PatternGenerator(Entity):
             )
         self._requireIdle("setTimeStep")
         self._dt = v
+        self._dtSet = True
 
     @command
     def getInitByRealState(self) -> bool:
@@ -840,6 +849,29 @@ class PatternGenerator(Entity):
         self._t0 = t
         self._tick = t
 
+    def _checkPeriod(self, first: bool) -> None:
+        """The device's time step is the generator's control period: adopted at the
+        walk's first tick unless ``setTimeStep`` set one; a device that ticks at another
+        period than the generator's clock assumes is refused (the walk would run slower
+        or faster than the robot)."""
+        dev = self._device
+        dt = None if dev is None else getattr(dev, "_timeStep", None)
+        if dt is None or abs(dt - self._dt) <= 1e-12:
+            return
+        if first and not self._dtSet:
+            if dt > self._T + 1e-12:
+                raise EntityError(
+                    f"PatternGenerator({self.name}): the device ticks every {dt} s, longer "
+                    f"than the sampling period {self._T} s"
+                )
+            self._dt = float(dt)
+            return
+        raise EntityError(
+            f"PatternGenerator({self.name}): the device {dev.name} ticks every {dt} s but "
+            f"the generator's clock assumes {self._dt} s (setTimeStep); the walk would run "
+            f"{dt / self._dt:.3g} times too slow"
+        )
+
     def _velocity(self, v: np.ndarray) -> np.ndarray:
         a = np.asarray(v, dtype=float)
         if a.shape != (3,) or not np.all(np.isfinite(a)):
@@ -987,6 +1019,7 @@ class PatternGenerator(Entity):
                 self._t0 += t - self._tick  # frozen: the walk's clock stops
                 self._tick = t
             return t
+        self._checkPeriod(first=self._t0 is None)
         if self._t0 is None:
             self._start(t)
         self._tick = t
