@@ -371,3 +371,28 @@ def pin_difference(model, q0, q1):
     import pinocchio
 
     return pinocchio.difference(model, q0, q1)
+
+
+def test_the_walk_is_replayed_in_the_viewer():
+    pytest.importorskip("meshcat")
+    from sotpy.errors import SotpyError
+
+    lines: list[str] = []
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            r = run_walk(
+                "nao",
+                gait=Gait(steps=2, length=0.05, ss=0.45, ds=0.02, height=0.02),
+                viewer=True,
+                hold=0.0,
+                out=lines.append,
+            )
+    except SotpyError as exc:
+        if "RobotViewer" in str(exc):
+            pytest.skip(f"meshcat cannot start here: {exc}")
+        raise
+    assert r["ok"]
+    text = "\n".join(lines)
+    assert "http://127.0.0.1:" in text
+    assert f"the page replays the {r['duration']:.2f} s motion" in text

@@ -804,6 +804,7 @@ def walk_run(args: argparse.Namespace) -> int:
             plot=args.plot,
             save=args.save,
             viewer=args.viewer,
+            hold=args.hold,
         )
     except (SotpyError, ValueError) as exc:
         print(f"sotpy demo {name}: {exc}", file=sys.stderr)

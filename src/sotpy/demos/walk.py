@@ -530,12 +530,14 @@ def run_walk(
     plot: str | None = None,
     save: str | None = None,
     viewer: bool = False,
+    hold: float | None = None,
     out: Any = print,
 ) -> dict[str, Any]:
     """Walk ``robot_name`` (module doc), check the motion and print the table; the
     figure to ``plot`` (PNG), the motion to ``save`` (.npz), a meshcat replay with
-    ``viewer``. ``online``: the velocity-driven walk of :data:`ONLINE_SCHEDULE`
-    (``gait`` gives its timing; default :data:`ONLINE_GAITS`), judged as the footstep
+    ``viewer`` (kept up until the page closes, or ``hold`` s). ``online``: the
+    velocity-driven walk of :data:`ONLINE_SCHEDULE` (``gait`` gives its timing; default
+    :data:`ONLINE_GAITS`), judged as the footstep
     walk plus the mean velocity of each command (``velocity``: :func:`velocityTracking`;
     a check: within 10 %). ``dynamicFilter``: Kajita's second stage. Returns
     :meth:`WalkLog.report`'s dict with ``table``, ``wall_time`` and ``tick_us`` (the mean
@@ -623,6 +625,6 @@ def run_walk(
         from . import open_viewer, replay
 
         view = open_viewer(robot, "walk", out)
-        replay(view, log.q[: log.n + 1], dt, None, out)
+        replay(view, log.q[: log.n + 1], dt, hold, out)
         view.close()
     return result
