@@ -21,16 +21,18 @@ task, ``leftfootref``/``rightfootref`` and their velocities into the feet tasks,
 ``waistattitudematrixabsolute`` into the waist's orientation). Every reference is in the
 world frame (``frameReference("World")``, the only frame sotpy's generator has).
 
-**The algorithm** (:mod:`sotpy.walking.preview`, :mod:`sotpy.walking.plan`): the steps
-make a :class:`~sotpy.walking.plan.StepPlan` (footprints, timing, C2 swing trajectories,
-the ZMP reference); Kajita's preview control of the cart-table model turns the ZMP
-reference into the CoM's trajectory, one sample every ``:samplingperiod`` (5 ms), and
-between two samples the CoM is the exact cubic of the sample's constant jerk, so a 1 ms
-controller reads a C2 CoM. The feet are the plan's closed-form trajectories evaluated at
-the tick's time. Every walk mode maps onto this: the step sequences of ``:stepseq``
-(walk mode 0, 4 numbers a step) and ``addStep`` go to the preview controller
-(jrl-walkgen's ``Kajita``; ``Morisawa``, ``PBW`` and ``Dimitrov`` are served by it too, as
-they track the same footsteps). See docs/walking.md for the parseCmd table.
+**The algorithms** (:mod:`sotpy.walking.walks`). *Footsteps* (``:stepseq`` in walk mode
+0, 4 numbers a step, and ``addStep``; jrl-walkgen's ``Kajita``, and ``Morisawa``, ``PBW``,
+``Dimitrov``, which track the same footsteps): the steps make a
+:class:`~sotpy.walking.plan.StepPlan` (footprints, timing, C2 swing trajectories, the ZMP
+reference), and Kajita's preview control of the cart-table model
+(:mod:`sotpy.walking.preview`) turns its ZMP reference into the CoM's trajectory, one
+sample every ``:samplingperiod`` (5 ms), computed when the steps are given; between two
+samples the CoM is the exact cubic of the sample's constant jerk, so a 1 ms controller
+reads a C2 CoM, and the feet are the plan's closed forms at the tick's time.
+``:useDynamicFilter true`` adds Kajita's second stage (:mod:`sotpy.walking.dynamic_filter`).
+*Velocity* (``:HerdtOnline``, ``:NaveauOnline``; ``velocitydes``): the walking MPC of
+:mod:`sotpy.walking.mpc`, replanned every 0.1 s. docs/walking.md has the parseCmd table.
 
 **Time.** The generator's time is the graph's tick: ``t_walk = (t - t0) dt`` with ``t0``
 the first tick at which ``trigger`` is read true and ``dt`` the control period: the time
