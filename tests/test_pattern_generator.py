@@ -9,7 +9,7 @@ import pytest
 from sotpy.demos.walk import GAITS, Gait, run_walk, stepSequence, zmpMargin
 from sotpy.dynamics import load_robot
 from sotpy.errors import CommandError, SignalTypeError, SotpyWarning
-from sotpy.graph import plug
+from sotpy.graph import plug, pool
 from sotpy.walking import PatternGenerator
 
 
@@ -396,3 +396,36 @@ def test_the_walk_is_replayed_in_the_viewer():
     text = "\n".join(lines)
     assert "http://127.0.0.1:" in text
     assert f"the page replays the {r['duration']:.2f} s motion" in text
+
+
+def test_the_control_period_is_the_devices(talos_pg):
+    """The generator's clock is the device's time step: adopted at the walk's first tick,
+    and a device ticking at another period than an explicit setTimeStep is refused."""
+    from sotpy.errors import EntityError
+
+    robot, pg = talos_pg
+    robot.device.setControlType("velocity")
+    robot.device.control.value = np.zeros(robot.model.nv)
+    pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 0.17 0.0 0.0  0.0 -0.17 0.0 0.0")
+    robot.device.increment(0.002)  # the device ticks at 2 ms
+    pg.trigger.value = True
+    for _ in range(50):
+        robot.device.increment(0.002)
+        _ = pg.comref.value
+    assert pg.getTimeStep() == pytest.approx(0.002)
+    assert pg.walkTime == pytest.approx(49 * 0.002)
+    pool.clear()
+    robot = load_robot("talos", prefix="pgp")
+    pg = PatternGenerator("pgp_pg")
+    pg.buildModel(robot)
+    pg.setTimeStep(0.001)
+    plug(robot.dynamic.com, pg.com)
+    plug(robot.dynamic.signal("left-ankle"), pg.leftfootcurrentpos)
+    plug(robot.dynamic.signal("right-ankle"), pg.rightfootcurrentpos)
+    pg.initState()
+    robot.device.setControlType("velocity")
+    robot.device.control.value = np.zeros(robot.model.nv)
+    robot.device.increment(0.005)
+    pg.trigger.value = True
+    with pytest.raises(EntityError, match=r"ticks every 0.005 s .* assumes 0.001 s"):
+        _ = pg.comref.value

@@ -64,7 +64,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..dynamics.types import SE3
-from ..errors import CommandError, EntityError, SignalTypeError, SotpyWarning
+from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
 from ..graph import BOOL, INT, MATRIX, VECTOR, Entity, Input, Output, command
 from .mpc import MPCParameters
 from .plan import Footprint, Sole, StepPlan, checkStep, quintic
@@ -857,8 +857,13 @@ class PatternGenerator(Entity):
         period than the generator's clock assumes is refused (the walk would run slower
         or faster than the robot)."""
         dev = self._device
-        dt = None if dev is None else getattr(dev, "_timeStep", None)
-        if dt is None or abs(dt - self._dt) <= 1e-12:
+        if dev is None:
+            return
+        try:
+            dt = float(dev.getTimeStep())
+        except SotpyError:  # the device has not ticked yet
+            return
+        if abs(dt - self._dt) <= 1e-12:
             return
         if first and not self._dtSet:
             if dt > self._T + 1e-12:
