@@ -429,3 +429,23 @@ def test_the_control_period_is_the_devices(talos_pg):
     pg.trigger.value = True
     with pytest.raises(EntityError, match=r"ticks every 0.005 s .* assumes 0.001 s"):
         _ = pg.comref.value
+
+
+def test_a_step_added_during_a_filtered_walk_keeps_the_reference_smooth():
+    robot = load_robot("talos", prefix="pgf")
+    pg = PatternGenerator("pgf_pg")
+    pg.buildModel(robot)
+    plug(robot.dynamic.com, pg.com)
+    plug(robot.dynamic.signal("left-ankle"), pg.leftfootcurrentpos)
+    plug(robot.dynamic.signal("right-ankle"), pg.rightfootcurrentpos)
+    pg.initState()
+    pg.parseCmd(":useDynamicFilter true")
+    pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 0.17 0.0 0.0  0.2 -0.17 0.0 0.0")
+    walk = pg.walk
+    t = 3.0  # in the first single support
+    before = walk.state(t + 0.0005)
+    pg._t0, pg._tick = 0, round(t / 0.001)  # the walk's clock at t, as after its ticks
+    pg.addStep(0.2, 0.17, 0.0)
+    after = walk.state(t + 0.0005)
+    np.testing.assert_allclose(after, before, atol=1e-9)  # the present is unchanged
+    assert len(walk.plan.steps) == 3

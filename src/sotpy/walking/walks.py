@@ -9,7 +9,7 @@ plain classes over arrays, no graph.
   during the walk re-run the controller from the current sample with its saved state
   (integrated error included), so the CoM's trajectory before it is unchanged. An
   optional correction (the dynamic filter, :mod:`sotpy.walking.dynamic_filter`) is added
-  sample by sample.
+  sample by sample; steps appended later keep it as it was and are not filtered.
 - :class:`VelocityWalk`: the walk of a velocity command ``(vx, vy, omega)``
   (``velocitydes``), planned by the MPC of :mod:`sotpy.walking.mpc` once per MPC period
   (0.1 s), in closed loop on its own cart-table state (as jrl-walkgen's online modes:
@@ -18,7 +18,14 @@ plain classes over arrays, no graph.
   footstep along a quintic in x, y and yaw that is re-planned at each MPC sample from
   the foot's current position, velocity and acceleration (so C2 through every re-plan)
   to rest at the landing time; in the last :data:`FREEZE` s of a swing the target is
-  kept. The height is the plan's ``h b(s)`` (:mod:`sotpy.walking.plan`).
+  kept (and given to the MPC as fixed). The height is the plan's ``h b(s)``
+  (:mod:`sotpy.walking.plan`). The foot lands one MPC period before the MPC's step ends:
+  the MPC constrains the ZMP at its samples only, and between its last sample on the old
+  sole and its first on the new one the ZMP moves across, which must happen while both
+  feet are down (with the landing at the MPC's step end, the ZMP left the support before
+  the foot was down: 90 mm outside the soles on Talos, measured). A command without a
+  plan is replaced by a stop, then by standing in double support where the feet are
+  (:attr:`VelocityWalk.fault` says why).
 
 Both give, at a time ``t`` (s since the walk began): the CoM state (3 x 2), the feet
 (each sole frame's position, yaw and velocity), the footprints on the ground, the
@@ -83,7 +90,17 @@ class FootstepWalk:
         self._S = np.concatenate((self._S[:k0], S))
         self._U = np.concatenate((self._U[:k0], U))
         self._E = np.concatenate((self._E[:k0], E))
-        self.correction = None  # a correction was for the trajectory it was made on
+        if self.correction is not None:
+            # steps added during a walk are not filtered: the correction made for the
+            # plan before them is kept as it was (dropping it would make the CoM's
+            # reference jump), and is zero on the new samples
+            dS, dU = self.correction
+            n = len(self._U)
+            pad = max(n - len(dU), 0)
+            self.correction = (
+                np.concatenate((dS[:n], np.zeros((pad, 3, 2)))),
+                np.concatenate((dU[:n], np.zeros((pad, 2)))),
+            )
 
     def extend(self, steps: list[Footprint], now: float) -> None:
         """Append ``steps`` (online): the plan is extended and the controller re-run from
