@@ -25,7 +25,7 @@ plain classes over arrays, no graph.
   feet are down (with the landing at the MPC's step end, the ZMP left the support before
   the foot was down: 90 mm outside the soles on Talos, measured). A command without a
   plan is replaced by a stop, then by standing in double support where the feet are
-  (:attr:`VelocityWalk.fault` says why).
+  (``VelocityWalk.fault`` says why).
 
 Both give, at a time ``t`` (s since the walk began): the CoM state (3 x 2), the feet
 (each sole frame's position, yaw and velocity), the footprints on the ground, the
@@ -200,9 +200,10 @@ class VelocityWalk:
     ``sole``, with the MPC's ``params`` and the swing height ``stepHeight`` (m).
 
     :meth:`advance` runs the MPC up to a time with the command read then; a failed plan
-    (:class:`~sotpy.errors.SolverError`) is retried with a zero command (stop), and if
-    that fails too the last plan's next jerks are kept (it was feasible: its ZMP stays
-    in its soles) and :attr:`fault` says why.
+    (:class:`~sotpy.errors.SolverError`) is retried with a zero command (stop), then, with
+    both feet down, as a stand in double support where they are; with a foot in the air
+    the last plan's next jerks are kept (it was feasible: its ZMP stays in its soles).
+    :attr:`fault` says which and why.
     """
 
     def __init__(
