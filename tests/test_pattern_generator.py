@@ -78,8 +78,9 @@ def test_stepseq_reads_four_numbers_a_step_and_explains_the_legacy_form(talos_pg
         pg.parseCmd(":stepseq " + legacy)
     with pytest.raises(CommandError, match="flat ground"):
         pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 0.17 0.0 0.1")
-    with pytest.raises(CommandError, match="longer than the leg"):
+    with pytest.raises(CommandError, match="longer than the leg") as info:
         pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.9 0.17 0.0 0.0")
+    assert str(info.value).startswith("PatternGenerator(pgt_pg).parseCmd(:stepseq): ")
     with pytest.raises(CommandError, match="crosses or overlaps"):
         pg.parseCmd(":stepseq 0.0 -0.085 0.0 0.0  0.2 -0.05 0.0 0.0")
     with pytest.raises(CommandError, match="where the support foot is"):

@@ -717,6 +717,17 @@ def collision_run(args: argparse.Namespace) -> int:
 WALK_ROBOTS = ("talos", "romeo", "nao")
 
 
+def _steps(text: str) -> int:
+    """argparse type of ``--steps``: an integer >= 2 (a step forward, one to close)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if n < 2:
+        raise argparse.ArgumentTypeError(f"expected at least 2 steps, got {n}")
+    return n
+
+
 def walk_options(parser: argparse.ArgumentParser, robot: str) -> None:
     """Options of ``sotpy demo <robot>-walk``: ``--steps N``, ``--step-length M``,
     ``--single-support S``, ``--double-support S``, ``--dt S``, ``--plot PATH``,
@@ -724,7 +735,9 @@ def walk_options(parser: argparse.ArgumentParser, robot: str) -> None:
     from .walk import GAITS
 
     gait = GAITS[robot]
-    parser.add_argument("--steps", type=int, default=gait.steps, help=f"swings ({gait.steps})")
+    parser.add_argument(
+        "--steps", type=_steps, default=gait.steps, help=f"swings, at least 2 ({gait.steps})"
+    )
     parser.add_argument(
         "--step-length",
         type=positive_float,

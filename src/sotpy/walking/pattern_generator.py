@@ -284,7 +284,7 @@ class PatternGenerator(Entity):
     def _requireModel(self, what: str) -> RobotGeometry:
         if self._geometry is None:
             raise CommandError(
-                f"PatternGenerator({self.name}).{what}: no model yet; call buildModel(robot) first"
+                f"{self._who(what)}: no model yet; call buildModel(robot) first"
             )
         return self._geometry
 
@@ -348,6 +348,15 @@ class PatternGenerator(Entity):
                 f"the legs' reach ({geo.maxComHeight:.4f} m with the legs straight)"
             )
 
+    def _who(self, what: str) -> str:
+        """``PatternGenerator(name).what`` for an error message (``what`` as it is when it
+        already names the entity: parseCmd's)."""
+        return (
+            what
+            if what.startswith("PatternGenerator(")
+            else f"PatternGenerator({self.name}).{what}"
+        )
+
     # -- steps -----------------------------------------------------------------------
     def _footprints(self, steps: Sequence[tuple[float, float, float]], who: str) -> list[Footprint]:
         """jrl-walkgen's relative steps (x, y, theta in degrees) as footprints: the first
@@ -356,7 +365,7 @@ class PatternGenerator(Entity):
         foot relative to the previous one."""
         geo = self._requireModel(who)
         if self._initial is None:
-            raise CommandError(f"PatternGenerator({self.name}).{who}: call initState() first")
+            raise CommandError(f"{self._who(who)}: call initState() first")
         feet = self._initial["footprints"]
         started = isinstance(self._walk, FootstepWalk) and self._t0 is not None
         if started and self._walk.plan.steps:
@@ -375,7 +384,7 @@ class PatternGenerator(Entity):
             dx, dy, _ = mid.relative(feet[side])
             if math.hypot(dx - x, dy - y) > 0.01:
                 raise CommandError(
-                    f"PatternGenerator({self.name}).{who}: the first step places the first "
+                    f"{self._who(who)}: the first step places the first "
                     f"support foot ({side}) at ({x:.3f}, {y:.3f}) from the feet's mid-point; "
                     f"that foot is at ({dx:.3f}, {dy:.3f}) (a first step must be where the "
                     f"support foot is, within 1 cm)"
@@ -392,7 +401,7 @@ class PatternGenerator(Entity):
                 support.yaw + math.radians(th),
                 side,
             )
-            checkStep(f"PatternGenerator({self.name}).{who}", support, f, geo.sole, geo.legLength)
+            checkStep(f"{self._who(who)}", support, f, geo.sole, geo.legLength)
             out.append(f)
             support = f
         return out
@@ -400,7 +409,7 @@ class PatternGenerator(Entity):
     def _addSteps(self, steps: list[tuple[float, float, float]], who: str) -> None:
         if isinstance(self._walk, VelocityWalk) or self._online:
             raise CommandError(
-                f"PatternGenerator({self.name}).{who}: the walk is driven by velocitydes "
+                f"{self._who(who)}: the walk is driven by velocitydes "
                 f"(:HerdtOnline); steps cannot be added to it"
             )
         if self._t0 is None:
@@ -441,7 +450,7 @@ class PatternGenerator(Entity):
         t = float(time)
         if not math.isfinite(t) or t < self._T - 1e-12:
             raise CommandError(
-                f"PatternGenerator({self.name}).{who}: a step time must be at least the "
+                f"{self._who(who)}: a step time must be at least the "
                 f"sampling period {self._T} s, got {time!r}"
             )
         self._requireIdle(who)
@@ -450,8 +459,7 @@ class PatternGenerator(Entity):
     def _requireIdle(self, who: str) -> None:
         if self._t0 is not None and self._walk is not None and not self._walk.finished(self._now()):
             raise CommandError(
-                f"PatternGenerator({self.name}).{who}: cannot change the walk's parameters "
-                f"during a walk"
+                f"{self._who(who)}: cannot change the walk's parameters during a walk"
             )
 
     def _replan(self) -> None:
