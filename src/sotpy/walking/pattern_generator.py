@@ -283,9 +283,7 @@ class PatternGenerator(Entity):
 
     def _requireModel(self, what: str) -> RobotGeometry:
         if self._geometry is None:
-            raise CommandError(
-                f"{self._who(what)}: no model yet; call buildModel(robot) first"
-            )
+            raise CommandError(f"{self._who(what)}: no model yet; call buildModel(robot) first")
         return self._geometry
 
     @command
