@@ -1,11 +1,12 @@
-"""The kinematic walk's costs: the preview-control tick, an online step added, and the
+"""The kinematic walk's costs: the preview-control tick, the walking MPC's replan, and the
 whole walking tick on Talos (generator, stack, device) against the same graph standing
 (the generator not triggered), measured in the same run.
 
 * **preview tick**: :meth:`sotpy.walking.preview.PreviewController.step` (both axes,
   N = 320 samples of 5 ms ahead), the work of one generator sample;
 * **generator read**: ``PatternGenerator.onestepofcontrol`` and its outputs at one tick
-  (the plan's feet, the cubic CoM, the ZMP reference; a preview step every 5th tick);
+  (the plan's feet, its sample's cubic CoM, the ZMP reference; the preview controller
+  ran when the steps were given);
 * **walking tick**: ``device.increment(1 ms)`` of the walking graph (docs/walking.md):
   the generator, the four-level SOT and the device, over the 15-step walk;
 * **online walking tick**: the velocity walk (``:HerdtOnline``, 0.2 then 0.3 m/s
@@ -19,7 +20,10 @@ whole walking tick on Talos (generator, stack, device) against the same graph st
 * the dynamic filter's time on the 15-step plan (once, when the steps are given).
 
 Reported: median, p99 and worst (us), and the ratio of the walking tick's median to the
-standing tick's. Usage::
+standing tick's; and each benchmarked walk judged by its motion (its saved ``q`` and
+``v``: the multibody ZMP's margin in the soles on the ground, the stance feet's slip,
+the distance covered; :func:`sotpy.demos.walk.contactChecks`), so that a faster tick
+that walks worse shows. Usage::
 
     python benchmarks/bench_walk.py           # the whole walk
     python benchmarks/bench_walk.py --quick   # 3 s of it, a smoke check
@@ -38,7 +42,7 @@ import warnings
 import numpy as np
 
 from sotpy._bench import machine_line
-from sotpy.demos.walk import GAITS, build_walk
+from sotpy.demos.walk import GAITS, build_walk, contactChecks, motionOf
 from sotpy.dynamics import load_robot
 from sotpy.graph import pool
 from sotpy.walking.preview import PreviewController, previewGains
@@ -47,6 +51,20 @@ from sotpy.walking.preview import PreviewController, previewGains
 def _stats(samples: list[float]) -> tuple[float, float, float]:
     a = np.asarray(samples) * 1e6
     return float(np.median(a)), float(np.percentile(a, 99)), float(a.max())
+
+
+def judge(name: str, robot, qs: list, vs: list) -> None:
+    """The benchmarked walk judged by its motion, not by the generator: the multibody ZMP
+    (Pinocchio's centroidal momentum rate) in the soles on the ground, the stance feet's
+    slip, the distance the feet's mid-point covered (sotpy.demos.walk's checks)."""
+    m = motionOf(robot, np.array(qs), np.array(vs), 1e-3)
+    c = contactChecks(m, 1e-3)
+    mid = [(m["sole"]["left"][k] + m["sole"]["right"][k]) / 2 for k in (0, -1)]
+    print(
+        f"{name}: the motion covered {mid[1][0] - mid[0][0]:.3f} m; ZMP margin >= "
+        f"{c['margin'] * 1e3:.1f} mm ({c['ticks_outside']} ticks outside); stance slip "
+        f"{c['slip'] * 1e3:.4f} mm"
+    )
 
 
 def preview_tick(n: int = 20000) -> tuple[float, float, float]:
@@ -75,10 +93,13 @@ def walking_ticks(
     robot.device.increment(1e-3)
     ticks = round((seconds or pg.plan.duration) / 1e-3)
     walk, gen = [], []
+    qs, vs = [], []
     for _ in range(ticks):
         t0 = time.perf_counter()
         robot.device.increment(1e-3)
         walk.append(time.perf_counter() - t0)
+        qs.append(robot.device.state.value.copy())
+        vs.append(robot.device.velocity.value.copy())
         if references is not None:
             references.append(
                 {
@@ -88,6 +109,7 @@ def walking_ticks(
                     "waist": pg.waistattitudematrixabsolute.value.rotation,
                 }
             )
+    judge("footstep walk", robot, qs, vs)
     # the generator alone, on a fresh one stepped by hand at the same ticks
     pool.clear()
     robot = load_robot("talos", prefix="bg")
@@ -128,15 +150,18 @@ def online_ticks(seconds: float) -> dict[str, tuple[float, float, float]]:
 
     mpc_module.VelocityMPC.solve = timed
     try:
-        ticks, out = round(seconds / 1e-3), []
+        ticks, out, qs, vs = round(seconds / 1e-3), [], [], []
         for k in range(ticks):
             if k == ticks // 2:
                 pg.velocitydes.value = np.array([0.3, 0.0, 0.1])
             t0 = time.perf_counter()
             robot.device.increment(1e-3)
             out.append(time.perf_counter() - t0)
+            qs.append(robot.device.state.value.copy())
+            vs.append(robot.device.velocity.value.copy())
     finally:
         mpc_module.VelocityMPC.solve = original
+    judge("online walk", robot, qs, vs)
     return {"online walking tick": _stats(out), "MPC replan (N = 16)": _stats(solves)}
 
 

@@ -84,11 +84,6 @@ class Gait:
     height: float = 0.05
     comHeight: float | None = None
 
-    @property
-    def distance(self) -> float:
-        """The distance the walk covers (m): the last swing closes the feet."""
-        return (self.steps - 1) * self.length
-
 
 #: The demos' gaits. Talos's is the SoT's (sot-talos-balance's walk data: 15 steps of
 #: 0.2 m, 0.78 / 0.02 s, CoM at 0.876681 m: 2.80 m at 0.25 m/s). The Nao-class robot

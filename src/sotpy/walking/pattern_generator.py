@@ -66,6 +66,7 @@ import pinocchio as pin
 from ..dynamics.types import SE3
 from ..errors import CommandError, EntityError, SignalTypeError, SotpyError, SotpyWarning
 from ..graph import BOOL, INT, MATRIX, VECTOR, Entity, Input, Output, command
+from ..graph.command import Command
 from .mpc import MPCParameters
 from .plan import Footprint, Sole, StepPlan, checkStep, quintic
 from .preview import GRAVITY, previewGains
@@ -195,6 +196,23 @@ INERT_COMMANDS: dict[str, str] = {
     ":numberstepsbeforestop": "the online MPC's steps before stopping",
     ":deleteallobstacles": "Naveau's obstacles",
 }
+
+
+_MODEL_FILES = (
+    "sotpy's generator takes its model from a sotpy robot, not from files: "
+    "pg.buildModel(robot) with robot = load_robot('talos') (or a robot description's URDF, "
+    "docs/robots.md)"
+)
+
+
+def _refused(name: str, way: str) -> Command:
+    """A command of the C++ entity sotpy refuses, saying ``way`` (what to do instead)."""
+
+    def refuse(self: PatternGenerator, *args: Any) -> None:
+        raise CommandError(f"PatternGenerator({self.name}).{name}: {way}")
+
+    refuse.__doc__ = f"Refused: {way}."
+    return Command(refuse, name)
 
 
 class PatternGenerator(Entity):
@@ -540,60 +558,24 @@ class PatternGenerator(Entity):
             return "driven by velocitydes (online)"
         return "none"
 
-    def _refusedFile(self, what: str) -> Callable[..., None]:
-        def refuse(*_: Any) -> None:
-            raise CommandError(
-                f"PatternGenerator({self.name}).{what}: sotpy's generator takes its model "
-                f"from a sotpy robot, not from files: pg.buildModel(robot) with robot = "
-                f"load_robot('talos') (or a robot description's URDF, docs/robots.md)"
-            )
-
-        return refuse
-
-    @command
-    def setURDFpath(self, path: str) -> None:
-        """Refused: use ``buildModel(robot)``."""
-        self._refusedFile("setURDFpath")()
-
-    @command
-    def setSRDFpath(self, path: str) -> None:
-        """Refused: use ``buildModel(robot)``."""
-        self._refusedFile("setSRDFpath")()
-
-    @command
-    def setXmlRank(self, path: str) -> None:
-        """Refused: use ``buildModel(robot)``."""
-        self._refusedFile("setXmlRank")()
-
-    @command
-    def setVrmlDir(self, path: str) -> None:
-        """Refused (VRML): use ``buildModel(robot)``."""
-        self._refusedFile("setVrmlDir")()
-
-    @command
-    def setVrml(self, path: str) -> None:
-        """Refused (VRML): use ``buildModel(robot)``."""
-        self._refusedFile("setVrml")()
-
-    @command
-    def setXmlSpec(self, path: str) -> None:
-        """Refused (VRML): use ``buildModel(robot)``."""
-        self._refusedFile("setXmlSpec")()
-
-    @command
-    def setParamPreview(self, path: str) -> None:
-        """Refused: the preview gains come from the Riccati equation (``:previewcontroltime``)."""
-        self._refusedFile("setParamPreview")()
-
-    @command
-    def setSoleParameters(self, length: float, width: float) -> None:
-        """Refused: the soles are the robot description's ``[feet]``."""
-        self._refusedFile("setSoleParameters")()
-
-    @command
-    def addJointMapping(self, link: str, name: str) -> None:
-        """Refused: the ankles are the robot's ``left-ankle``/``right-ankle`` op points."""
-        self._refusedFile("addJointMapping")()
+    # the C++ entity's model-file and VRML-era commands, each refused with the way to do it
+    setURDFpath = _refused("setURDFpath", _MODEL_FILES)
+    setSRDFpath = _refused("setSRDFpath", _MODEL_FILES)
+    setXmlRank = _refused("setXmlRank", _MODEL_FILES)
+    setVrmlDir = _refused("setVrmlDir", _MODEL_FILES)
+    setVrml = _refused("setVrml", _MODEL_FILES)
+    setXmlSpec = _refused("setXmlSpec", _MODEL_FILES)
+    setParamPreview = _refused(
+        "setParamPreview",
+        "the preview gains come from the Riccati equation (:previewcontroltime sets the preview)",
+    )
+    setSoleParameters = _refused(
+        "setSoleParameters", "the soles are the robot description's [feet] (buildModel(robot))"
+    )
+    addJointMapping = _refused(
+        "addJointMapping",
+        "the ankles are the robot's left-ankle and right-ankle op points (buildModel(robot))",
+    )
 
     # -- parseCmd --------------------------------------------------------------------
     @command
@@ -907,19 +889,21 @@ class PatternGenerator(Entity):
     def _holdInitial(self) -> None:
         init = self._initial
         com = init["com"].copy()  # the CoM height moves to :comheight after the trigger
-        self._setOutputs(com, np.zeros(3), np.zeros(3), init["footprints"], None, 0.0, 0, False)
+        feet = {
+            s: (np.array([f.x, f.y, 0.0]), np.array([f.yaw]), np.zeros(4))
+            for s, f in init["footprints"].items()
+        }
+        self._setOutputs(com, np.zeros(3), np.zeros(3), feet, 0.0, 0, False)
         for side in _SIDES:  # exactly the feet read
             self._out[f"{side}foot"] = init["ankles"][side]
 
-    def _setOutputs(self, com, dcom, ddcom, footprints, swing, tau, phase, inprocess) -> None:
+    def _setOutputs(self, com, dcom, ddcom, feet, tau, phase, inprocess) -> None:
+        """The outputs of a tick from the CoM's state and ``feet`` (side -> the sole frame's
+        position, yaw and velocity: the walk's ``feet``)."""
         out = self._out
         yaws = []
         for side in _SIDES:
-            if swing is not None and side in swing:
-                p, yaw, nu = swing[side]
-            else:
-                f = footprints[side]
-                p, yaw, nu = np.array([f.x, f.y, 0.0]), np.array([f.yaw]), np.zeros(4)
+            p, yaw, nu = feet[side]
             weight, rate = self._startWeight(side, tau)
             yaws.append(float(yaw[0]))
             if not nu.any() and not rate:
@@ -1049,7 +1033,6 @@ class PatternGenerator(Entity):
             com,
             dcom,
             ddcom,
-            walk.footprints(tau),
             walk.feet(tau),
             tau,
             walk.contactPhase(tau),

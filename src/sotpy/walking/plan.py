@@ -317,7 +317,7 @@ class StepPlan:
         m = quintic((t - start) / (p.end - start))[0] if p.end > start else 1.0
         return a + (b - a) * m
 
-    def _footprintsAt(self, t: float) -> dict[str, Footprint]:
+    def footprintsAt(self, t: float) -> dict[str, Footprint]:
         """The footprints of the feet on the ground at ``t`` (a swinging foot's is where
         it left)."""
         if t >= self.duration:
@@ -333,7 +333,7 @@ class StepPlan:
         at ``t``: ``side -> (p, yaw, nu)`` with ``p`` (m, world), ``yaw`` (rad) as a
         1-array, ``nu = (dp/dt, dyaw/dt)`` (size 4: m/s and rad/s)."""
         out = {}
-        for side, f in self._footprintsAt(t).items():
+        for side, f in self.footprintsAt(t).items():
             out[side] = (np.array([f.x, f.y, 0.0]), np.array([f.yaw]), np.zeros(4))
         p = self.phaseAt(t)
         if p.swing is not None and p.start <= t < p.end:
@@ -356,6 +356,6 @@ class StepPlan:
         """The corners (k x 2, m, world) of the soles on the ground at ``t``: both in
         double support, the support foot's in single support (not their hull)."""
         p = self.phaseAt(t)
-        feet = self._footprintsAt(t)
+        feet = self.footprintsAt(t)
         sides = ["left", "right"] if p.support is None or t >= self.duration else [p.support]
         return np.concatenate([feet[s].point(self.sole.corners()) for s in sides])

@@ -180,11 +180,6 @@ class PreviewController:
         self.jerk = np.zeros(2)
 
     @property
-    def horizon(self) -> int:
-        """N, the number of future samples :meth:`step` reads."""
-        return len(self.gains.F)
-
-    @property
     def zmp(self) -> np.ndarray:
         """The cart-table ZMP of the current state, ``C X`` (size 2, m)."""
         return self.C @ self.state

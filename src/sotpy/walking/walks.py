@@ -146,7 +146,7 @@ class FootstepWalk:
 
     def footprints(self, t: float) -> dict[str, Footprint]:
         """The footprints of the feet at ``t`` (a swinging foot's: where it left)."""
-        return self.plan._footprintsAt(t)
+        return self.plan.footprintsAt(t)
 
     def contactPhase(self, t: float) -> int:
         """SoT's ``contactphase`` at ``t``."""
